@@ -1,0 +1,125 @@
+"""The in-memory form of a take: plain NumPy arrays, no pxr.
+
+Every algorithm in facedyn works on a `Performance` (or on the arrays it holds) and never
+on a USD stage; `facedyn.usd.take` converts between the two.
+
+Conventions (used across the whole package):
+- units are the take's (centimetres by default), Y up;
+- a skull transform T(t) maps skull space to world space:
+  ``world = R(q) @ skull + t`` with ``q`` a unit quaternion stored scalar-first
+  ``(w, x, y, z)`` and ``t`` a translation;
+- ``points`` are the skin in skull space (equal to world space while the skull is the
+  identity, as in a freshly imported capture).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from facedyn.geometry import quaternion
+
+ROLES = ("captured", "stabilized", "quasistatic", "synthesized", "retargeted")
+
+
+@dataclass
+class Topology:
+    """Polygon connectivity of the face mesh (USD's faceVertexCounts/Indices)."""
+
+    face_vertex_counts: np.ndarray  # (P,) int32
+    face_vertex_indices: np.ndarray  # (sum(counts),) int32
+
+    @property
+    def point_count(self) -> int:
+        return int(self.face_vertex_indices.max()) + 1 if self.face_vertex_indices.size else 0
+
+    def triangles(self) -> np.ndarray:
+        """Fan-triangulate every polygon: (T, 3) int array, vectorized."""
+        counts = np.asarray(self.face_vertex_counts, dtype=np.int64)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        tri_per_poly = np.maximum(counts - 2, 0)
+        poly = np.repeat(np.arange(len(counts)), tri_per_poly)
+        k = np.arange(tri_per_poly.sum()) - np.repeat(np.cumsum(tri_per_poly) - tri_per_poly, tri_per_poly)
+        base = starts[poly]
+        idx = np.asarray(self.face_vertex_indices, dtype=np.int64)
+        return np.stack([idx[base], idx[base + k + 1], idx[base + k + 2]], axis=1).astype(np.int32)
+
+    def fingerprint(self) -> str:
+        """A short hash that identifies this connectivity (used to match models to meshes)."""
+        import hashlib
+
+        h = hashlib.sha1()
+        h.update(np.ascontiguousarray(self.face_vertex_counts, dtype=np.int32).tobytes())
+        h.update(np.ascontiguousarray(self.face_vertex_indices, dtype=np.int32).tobytes())
+        return h.hexdigest()[:16]
+
+
+@dataclass
+class UVs:
+    """Texture coordinates as authored by USD: values plus optional indices."""
+
+    values: np.ndarray  # (K, 2) float32
+    indices: np.ndarray | None  # (sum(counts),) int32 for faceVarying, None when not indexed
+    interpolation: str  # "faceVarying" or "vertex"
+
+
+@dataclass
+class Performance:
+    """A take as arrays: F frames of an N-point mesh plus its skull motion."""
+
+    points: np.ndarray  # (F, N, 3) float32, skull space
+    frames: np.ndarray  # (F,) float64 time codes (capture frame numbers)
+    fps: float
+    topology: Topology
+    skull_translate: np.ndarray | None = None  # (F, 3) float64; None = identity
+    skull_orient: np.ndarray | None = None  # (F, 4) float64 (w, x, y, z); None = identity
+    uvs: UVs | None = None
+    rest_points: np.ndarray | None = None  # (N, 3) float32, skull space
+    rigid_weights: np.ndarray | None = None  # (N,) float32 in [0, 1]
+    face_vertices: np.ndarray | None = None  # int32 indices of the face region
+    skin_samples: np.ndarray | None = None  # int32 vertex indices
+    landmarks: np.ndarray | None = None  # (L, 3) skull-space skull landmarks
+    offsets: np.ndarray | None = None  # (F, N, 3) float32 dynamics offsets (skull space)
+    solve_error: np.ndarray | None = None  # (F,) float32 per-frame stabilization error
+    role: str = "captured"
+    meters_per_unit: float = 0.01
+    up_axis: str = "Y"
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.points = np.asarray(self.points, dtype=np.float32)
+        self.frames = np.asarray(self.frames, dtype=np.float64)
+        if self.points.ndim != 3 or self.points.shape[2] != 3:
+            raise ValueError(f"points must be (frames, points, 3), got {self.points.shape}")
+        if len(self.frames) != len(self.points):
+            raise ValueError(f"{len(self.frames)} frame numbers for {len(self.points)} frames of points")
+        if self.role not in ROLES:
+            raise ValueError(f"role must be one of {ROLES}, got {self.role!r}")
+
+    @property
+    def frame_count(self) -> int:
+        return self.points.shape[0]
+
+    @property
+    def point_count(self) -> int:
+        return self.points.shape[1]
+
+    def skull(self) -> tuple[np.ndarray, np.ndarray]:
+        """(translate (F,3), orient (F,4) wxyz), identity where the take has none."""
+        f = self.frame_count
+        t = self.skull_translate if self.skull_translate is not None else np.zeros((f, 3))
+        q = self.skull_orient
+        if q is None:
+            q = np.zeros((f, 4))
+            q[:, 0] = 1.0
+        return np.asarray(t, dtype=np.float64), np.asarray(q, dtype=np.float64)
+
+    def world_points(self) -> np.ndarray:
+        """The skin in world space, T(t) applied to the skull-space points."""
+        t, q = self.skull()
+        rot = quaternion.to_matrix(q)
+        return (np.einsum("fij,fnj->fni", rot, self.points.astype(np.float64)) + t[:, None, :]).astype(np.float32)
+
+    def with_changes(self, **changes) -> "Performance":
+        return replace(self, **changes)
+

@@ -1,0 +1,49 @@
+"""Registering facedyn's USD plugins (the codeless schemas) with USD.
+
+USD builds its schema registry once, from the plugins it knows at that moment. facedyn's
+plugins therefore have to be registered before anything asks for a schema; `import facedyn`
+does it, and checks that it worked so that a late import fails loudly instead of silently
+authoring untyped properties.
+"""
+from __future__ import annotations
+
+import importlib.resources
+import os
+from pathlib import Path
+
+SCHEMA_NAMES = ("FacedynSkullAPI", "FacedynFaceAPI", "FacedynProcessorAPI")
+
+
+class PluginRegistrationError(RuntimeError):
+    """facedyn's USD plugins could not be found or were registered too late."""
+
+
+def plugin_root() -> Path:
+    """The folder holding facedyn's plugInfo.json, in an editable or a wheel install."""
+    root = importlib.resources.files("facedyn.plugins")
+    path = Path(str(root))
+    if not (path / "plugInfo.json").is_file():
+        raise PluginRegistrationError(
+            f"facedyn's USD plugins are missing: no plugInfo.json in {path}; reinstall facedyn"
+        )
+    return path
+
+
+def export_line() -> str:
+    """The shell line that lets usdview and DCCs (which start USD before facedyn) find the plugins."""
+    root = plugin_root()
+    return f'export PXR_PLUGINPATH_NAME="{root}${{PXR_PLUGINPATH_NAME:+{os.pathsep}$PXR_PLUGINPATH_NAME}}"'
+
+
+def register_plugins() -> None:
+    """Register the plugins and verify that USD's schema registry knows every facedyn schema."""
+    from pxr import Plug, Usd
+
+    Plug.Registry().RegisterPlugins(str(plugin_root()))
+    registry = Usd.SchemaRegistry()
+    missing = [name for name in SCHEMA_NAMES if registry.FindAppliedAPIPrimDefinition(name) is None]
+    if missing:
+        raise PluginRegistrationError(
+            "USD's schema registry was built before facedyn registered its plugins, so it lacks "
+            f"{', '.join(missing)}. Import facedyn before anything opens a stage, or run: {export_line()}"
+        )

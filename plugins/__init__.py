@@ -1,0 +1,1 @@
+"""USD plugins shipped with facedyn (PXR_PLUGINPATH_NAME points at this folder)."""
