@@ -11,10 +11,12 @@ import importlib.resources
 import os
 from pathlib import Path
 
+from facedyn.errors import FacedynError
+
 SCHEMA_NAMES = ("FacedynSkullAPI", "FacedynFaceAPI", "FacedynProcessorAPI")
 
 
-class PluginRegistrationError(RuntimeError):
+class PluginRegistrationError(FacedynError):
     """facedyn's USD plugins could not be found or were registered too late."""
 
 
@@ -41,7 +43,11 @@ def register_plugins() -> None:
 
     Plug.Registry().RegisterPlugins(str(plugin_root()))
     registry = Usd.SchemaRegistry()
-    missing = [name for name in SCHEMA_NAMES if registry.FindAppliedAPIPrimDefinition(name) is None]
+    missing = [
+        name
+        for name in SCHEMA_NAMES
+        if (definition := registry.FindAppliedAPIPrimDefinition(name)) is None or not definition.GetPropertyNames()
+    ]
     if missing:
         raise PluginRegistrationError(
             "USD's schema registry was built before facedyn registered its plugins, so it lacks "

@@ -1,0 +1,189 @@
+"""The import processor: any animated mesh (USD or an OBJ sequence) -> a canonical take.
+
+The capture layer defines facedyn's layout (/Performance/Skull/Face), with the skull at the
+identity and the tracked points baked to world space in centimetres, Y up; a `take.usda`
+root beside it lists it as its base sublayer, ready for stabilize and the others.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from facedyn.errors import UsageError
+from facedyn.processors.base import Parameter, Processor, Request, Result
+from facedyn.progress import Progress
+
+CENTIMETRES = 0.01  # metersPerUnit of every facedyn take
+
+
+class ImportProcessor(Processor):
+    name = "import"
+    version = "1"
+    summary = "turn a time-sampled USD mesh or an OBJ sequence into a canonical take (capture layer + take.usda)"
+    input_metavar = "SRC"
+    many_inputs = True
+    parameters = (
+        Parameter("mesh", str, "", "prim path of the animated Mesh in a USD source (default: the only one)"),
+        Parameter("fps", float, 0.0, "frame rate of an OBJ sequence (required for OBJ; USD sources carry theirs)"),
+        Parameter("units", float, 1.0, "centimetres per unit of an OBJ sequence"),
+        Parameter("root", str, "", "take root to create or extend (default: take.usda beside the output)"),
+    )
+
+    def check(self, request: Request) -> dict:
+        source = _source(request)
+        if source.kind == "usd":
+            stage, mesh_prim, time_codes = _usd_source(source.paths[0], request)
+            return {"source": str(source.paths[0]), "mesh": str(mesh_prim.GetPath()), "frames": len(time_codes),
+                    "fps": stage.GetTimeCodesPerSecond(), "root": str(_root_path(request))}
+        _require_fps(request)
+        return {"source": f"{len(source.paths)} OBJ files", "fps": request.params["fps"], "root": str(_root_path(request))}
+
+    def run(self, request: Request, progress: Progress) -> Result:
+        source = _source(request)
+        if source.kind == "usd":
+            return _import_usd(source.paths[0], request, progress)
+        return _import_obj(source.paths, request, progress)
+
+
+class _Source:
+    def __init__(self, kind: str, paths: list[Path]):
+        self.kind, self.paths = kind, paths
+
+
+def _source(request: Request) -> _Source:
+    paths = list(request.inputs)
+    if len(paths) == 1 and paths[0].is_dir():
+        paths = sorted(paths[0].glob("*.obj"))
+        if not paths:
+            raise UsageError(f"{request.inputs[0]}: folder holds no .obj files")
+    suffixes = {p.suffix.lower() for p in paths}
+    if suffixes == {".obj"}:
+        return _Source("obj", sorted(paths, key=_frame_number_key))
+    if len(paths) == 1:
+        return _Source("usd", paths)
+    raise UsageError("import takes one USD file, or OBJ files (a folder, or a list such as face.*.obj)")
+
+
+def _root_path(request: Request) -> Path:
+    root = request.params["root"]
+    return Path(root) if root else request.output.parent / "take.usda"
+
+
+def _require_fps(request: Request) -> float:
+    fps = request.params["fps"]
+    if fps <= 0:
+        raise UsageError("an OBJ sequence needs --fps (its frame rate), e.g. --fps 120")
+    return fps
+
+
+def _usd_source(path: Path, request: Request):
+    from facedyn.usd.errors import TakeError
+    from facedyn.usd.stage import get_prim, layer_name, open_stage
+    from facedyn.usd.take import find_animated_meshes, select_time_codes
+    from pxr import UsdGeom
+
+    stage = open_stage(path)
+    if request.params["mesh"]:
+        mesh_prim = get_prim(stage, request.params["mesh"])
+        if not mesh_prim.IsA(UsdGeom.Mesh):
+            raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()} is not a Mesh")
+    else:
+        animated = find_animated_meshes(stage)
+        if not animated:
+            raise TakeError(f"{layer_name(stage)}: no Mesh with time-sampled points (nothing to import)")
+        if len(animated) > 1:
+            names = ", ".join(str(p.GetPath()) for p in animated)
+            raise TakeError(f"{layer_name(stage)}: several animated meshes ({names}); choose one with --mesh")
+        mesh_prim = animated[0]
+    return stage, mesh_prim, select_time_codes(stage, mesh_prim, request.frames)
+
+
+def _import_usd(path: Path, request: Request, progress: Progress) -> Result:
+    from facedyn.usd import schema
+    from facedyn.usd.layers import LayerContent
+    from facedyn.usd.stage import layer_name
+    from facedyn.usd.take import ensure_finite, read_topology, read_uvs, read_vec3_samples
+    from facedyn.usd.timing import Timing
+    from pxr import Usd, UsdGeom
+
+    stage, mesh_prim, time_codes = _usd_source(path, request)
+    where = f"{layer_name(stage)}: {mesh_prim.GetPath()}"
+    mesh = UsdGeom.Mesh(mesh_prim)
+    topology = read_topology(mesh, where)
+    progress.start("import: read points", 1)
+    points = read_vec3_samples(mesh.GetPointsAttr(), time_codes, where + ".points").astype(np.float64)
+    progress.finish()
+    ensure_finite(points, time_codes, where + ".points")
+    if points.shape[1] != topology.point_count:
+        from facedyn.usd.errors import TakeError
+
+        raise TakeError(f"{where}: {points.shape[1]} points but the topology indexes {topology.point_count}")
+    xforms = np.array([np.asarray(UsdGeom.XformCache(Usd.TimeCode(t)).GetLocalToWorldTransform(mesh_prim)) for t in time_codes])
+    if not np.allclose(xforms, np.eye(4)):
+        points = np.einsum("fni,fij->fnj", points, xforms[:, :3, :3]) + xforms[:, None, 3, :3]
+    timing = Timing.from_stage(stage)
+    points = _to_canonical_axes(points * (timing.meters_per_unit / CENTIMETRES), timing.up_axis)
+    face = schema.FaceAttributes.read(mesh_prim)
+    face.role = "captured"
+    layer = LayerContent(
+        frames=time_codes,
+        points=points.astype(np.float32),
+        topology=topology,
+        uvs=read_uvs(mesh),
+        face=face,
+        skull=schema.SkullAttributes(solver="identity"),
+    )
+    out_timing = Timing(timing.time_codes_per_second, timing.frames_per_second, float(time_codes[0]), float(time_codes[-1]), CENTIMETRES, "Y")
+    summary = {"source mesh": str(mesh_prim.GetPath()), "points": points.shape[1], "fps": timing.time_codes_per_second}
+    return Result(layer=layer, timing=out_timing, inputs=[str(path)], define=True, summary=summary, root=_root_path(request))
+
+
+def _import_obj(paths: list[Path], request: Request, progress: Progress) -> Result:
+    from facedyn.io.obj import read_obj_sequence
+    from facedyn.performance import Topology
+    from facedyn.usd import schema
+    from facedyn.usd.layers import LayerContent
+    from facedyn.usd.timing import Timing
+
+    fps = _require_fps(request)
+    frames = _frame_numbers(paths)
+    if request.frames is not None:
+        keep = (frames >= request.frames[0]) & (frames <= request.frames[1])
+        if not keep.any():
+            raise UsageError(f"no OBJ frame in {request.frames[0]:g}:{request.frames[1]:g}")
+        paths, frames = [p for p, k in zip(paths, keep) if k], frames[keep]
+    sequence = read_obj_sequence(paths, progress=progress)
+    points = sequence.points * request.params["units"]
+    layer = LayerContent(
+        frames=frames,
+        points=points.astype(np.float32),
+        topology=Topology(sequence.face_vertex_counts, sequence.face_vertex_indices),
+        uvs=sequence.uvs,
+        face=schema.FaceAttributes(role="captured"),
+        skull=schema.SkullAttributes(solver="identity"),
+    )
+    timing = Timing(fps, fps, float(frames[0]), float(frames[-1]), CENTIMETRES, "Y")
+    summary = {"obj files": len(paths), "points": points.shape[1], "fps": fps}
+    return Result(layer=layer, timing=timing, inputs=[str(p) for p in paths], define=True, summary=summary, root=_root_path(request))
+
+
+def _frame_number_key(path: Path):
+    match = re.search(r"(\d+)$", path.stem)
+    return (0, int(match.group(1)), path.name) if match else (1, 0, path.name)
+
+
+def _frame_numbers(paths: list[Path]) -> np.ndarray:
+    """The trailing frame numbers of the file names (face.1001.obj -> 1001), else 1, 2, 3..."""
+    numbers = [re.search(r"(\d+)$", p.stem) for p in paths]
+    if all(numbers) and len({int(m.group(1)) for m in numbers}) == len(paths):
+        return np.array([int(m.group(1)) for m in numbers], dtype=np.float64)
+    return np.arange(1, len(paths) + 1, dtype=np.float64)
+
+
+def _to_canonical_axes(points: np.ndarray, up_axis: str) -> np.ndarray:
+    """Z-up scenes are turned Y-up (x, y, z) -> (x, z, -y); Y-up ones are left alone."""
+    if up_axis == "Z":
+        return np.stack([points[..., 0], points[..., 2], -points[..., 1]], axis=-1)
+    return points

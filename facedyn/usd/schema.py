@@ -1,0 +1,156 @@
+"""Thin Python wrappers over facedyn's codeless API schemas.
+
+The schemas have no generated C++ classes (they are codeless), so these helpers name their
+properties once and read/write them as NumPy arrays.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+from pxr import Sdf, Usd, Vt
+
+SKULL_API = "FacedynSkullAPI"
+FACE_API = "FacedynFaceAPI"
+PROCESSOR_API = "FacedynProcessorAPI"
+
+LANDMARKS_ATTR = "facedyn:skull:landmarks"
+SOLVER_ATTR = "facedyn:skull:solver"
+SOLVE_ERROR_ATTR = "facedyn:skull:solveError"
+REFERENCE_FRAME_ATTR = "facedyn:skull:referenceFrame"
+
+ROLE_ATTR = "facedyn:face:role"
+REST_POINTS_ATTR = "facedyn:face:restPoints"
+SKIN_SAMPLES_ATTR = "facedyn:face:skinSamples"
+RIGID_WEIGHTS_ATTR = "facedyn:face:rigidWeights"
+FACE_VERTICES_ATTR = "facedyn:face:faceVertices"
+OFFSETS_ATTR = "primvars:facedyn:dynamicsOffset"
+
+
+def _get(prim: Usd.Prim, name: str, dtype) -> np.ndarray | None:
+    attr = prim.GetAttribute(name)
+    if not attr or not attr.HasAuthoredValue():
+        return None
+    value = attr.Get()
+    return None if value is None else np.asarray(value, dtype=dtype)
+
+
+@dataclass
+class FaceAttributes:
+    """The static FacedynFaceAPI values of a face mesh."""
+
+    role: str = "captured"
+    rest_points: np.ndarray | None = None
+    skin_samples: np.ndarray | None = None
+    rigid_weights: np.ndarray | None = None
+    face_vertices: np.ndarray | None = None
+
+    @classmethod
+    def read(cls, prim: Usd.Prim) -> "FaceAttributes":
+        role = prim.GetAttribute(ROLE_ATTR).Get() if prim.HasAPI(FACE_API) else None
+        return cls(
+            role=str(role) if role else "captured",
+            rest_points=_get(prim, REST_POINTS_ATTR, np.float32),
+            skin_samples=_get(prim, SKIN_SAMPLES_ATTR, np.int32),
+            rigid_weights=_get(prim, RIGID_WEIGHTS_ATTR, np.float32),
+            face_vertices=_get(prim, FACE_VERTICES_ATTR, np.int32),
+        )
+
+    def write(self, prim: Usd.Prim) -> None:
+        prim.ApplyAPI(FACE_API)
+        prim.CreateAttribute(ROLE_ATTR, Sdf.ValueTypeNames.Token).Set(self.role)
+        arrays = (
+            (REST_POINTS_ATTR, Sdf.ValueTypeNames.Point3fArray, Vt.Vec3fArray, self.rest_points, np.float32),
+            (SKIN_SAMPLES_ATTR, Sdf.ValueTypeNames.IntArray, Vt.IntArray, self.skin_samples, np.int32),
+            (RIGID_WEIGHTS_ATTR, Sdf.ValueTypeNames.FloatArray, Vt.FloatArray, self.rigid_weights, np.float32),
+            (FACE_VERTICES_ATTR, Sdf.ValueTypeNames.IntArray, Vt.IntArray, self.face_vertices, np.int32),
+        )
+        for name, type_name, vt_type, value, dtype in arrays:
+            if value is not None:
+                prim.CreateAttribute(name, type_name).Set(vt_type.FromNumpy(np.ascontiguousarray(value, dtype=dtype)))
+
+
+@dataclass
+class SkullAttributes:
+    """The static FacedynSkullAPI values of a skull Xform."""
+
+    solver: str = "identity"
+    landmarks: np.ndarray | None = None
+    reference_frame: float | None = None
+
+    @classmethod
+    def read(cls, prim: Usd.Prim) -> "SkullAttributes":
+        solver = prim.GetAttribute(SOLVER_ATTR).Get() if prim.HasAPI(SKULL_API) else None
+        reference = prim.GetAttribute(REFERENCE_FRAME_ATTR)
+        return cls(
+            solver=str(solver) if solver else "identity",
+            landmarks=_get(prim, LANDMARKS_ATTR, np.float32),
+            reference_frame=reference.Get() if reference and reference.HasAuthoredValue() else None,
+        )
+
+    def write(self, prim: Usd.Prim) -> None:
+        prim.ApplyAPI(SKULL_API)
+        prim.CreateAttribute(SOLVER_ATTR, Sdf.ValueTypeNames.Token).Set(self.solver)
+        if self.landmarks is not None:
+            value = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(self.landmarks, dtype=np.float32))
+            prim.CreateAttribute(LANDMARKS_ATTR, Sdf.ValueTypeNames.Point3fArray).Set(value)
+        if self.reference_frame is not None:
+            prim.CreateAttribute(REFERENCE_FRAME_ATTR, Sdf.ValueTypeNames.Double).Set(float(self.reference_frame))
+
+
+@dataclass
+class Provenance:
+    """One processor run: recorded in customLayerData and as a FacedynProcessorAPI instance."""
+
+    processor: str
+    version: str
+    parameters: dict
+    frame_range: tuple[float, float]
+    inputs: list[str]
+
+    @property
+    def instance_name(self) -> str:
+        return self.processor.replace("-", "_")
+
+    def as_dict(self) -> dict:
+        """The run as layer metadata (customLayerData["facedyn"]); arrays as typed Vt arrays."""
+        return {
+            "processor": self.processor,
+            "version": self.version,
+            "parameters": json.dumps(self.parameters, sort_keys=True, default=str),
+            "frameRange": Vt.DoubleArray([float(f) for f in self.frame_range]),
+            "inputs": Vt.StringArray([str(i) for i in self.inputs]),
+        }
+
+    def write(self, prim: Usd.Prim) -> None:
+        prim.ApplyAPI(PROCESSOR_API, self.instance_name)
+        prefix = f"facedyn:processor:{self.instance_name}:"
+        types = Sdf.ValueTypeNames
+        prim.CreateAttribute(prefix + "processor", types.Token).Set(self.processor)
+        prim.CreateAttribute(prefix + "version", types.String).Set(self.version)
+        prim.CreateAttribute(prefix + "parameters", types.String).Set(json.dumps(self.parameters, sort_keys=True, default=str))
+        prim.CreateAttribute(prefix + "frameRange", types.Double2).Set(tuple(float(f) for f in self.frame_range))
+        prim.CreateAttribute(prefix + "inputs", types.StringArray).Set([str(i) for i in self.inputs])
+
+
+def read_provenance(prim: Usd.Prim) -> list[dict]:
+    """Every FacedynProcessorAPI instance applied to prim, as dicts."""
+    runs = []
+    for schema in prim.GetAppliedSchemas():
+        if not schema.startswith(PROCESSOR_API + ":"):
+            continue
+        name = schema.split(":", 1)[1]
+        prefix = f"facedyn:processor:{name}:"
+        params = prim.GetAttribute(prefix + "parameters").Get()
+        frame_range = prim.GetAttribute(prefix + "frameRange").Get()
+        runs.append(
+            {
+                "processor": prim.GetAttribute(prefix + "processor").Get(),
+                "version": prim.GetAttribute(prefix + "version").Get(),
+                "parameters": json.loads(params) if params else {},
+                "frameRange": list(frame_range) if frame_range is not None else None,
+                "inputs": list(prim.GetAttribute(prefix + "inputs").Get() or []),
+            }
+        )
+    return runs

@@ -1,0 +1,215 @@
+"""Reading a take (a composed USD stage in facedyn's layout) into a `Performance`.
+
+The layout (DESIGN.md): an Xform with FacedynSkullAPI whose translate + orient ops are the
+skull transform T(t), and below it a Mesh with FacedynFaceAPI whose points are the skin in
+skull space. Values are read frame by frame as whole arrays and checked once, so a bad take
+fails here with a message naming the file and the prim instead of deep inside an algorithm.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pxr import Usd, UsdGeom
+
+from facedyn.performance import UVs, Performance, Topology
+from facedyn.usd import schema
+from facedyn.usd.errors import TakeError
+from facedyn.usd.stage import get_prim, layer_name, open_stage
+from facedyn.usd.timing import Timing
+
+
+@dataclass(frozen=True)
+class TakeSource:
+    """Where a Performance came from: what result layers need to point back at it."""
+
+    path: Path
+    stage: Usd.Stage
+    mesh_path: str
+    skull_path: str | None
+    timing: Timing
+    layer_identifiers: tuple[str, ...]
+
+
+def read_take(
+    path: str | os.PathLike, mesh: str | None = None, frames: tuple[float, float] | None = None
+) -> tuple[Performance, TakeSource]:
+    """Read the face of a take (the mesh with FacedynFaceAPI, or `mesh`) over `frames` (inclusive)."""
+    stage = open_stage(path)
+    mesh_prim = get_prim(stage, mesh) if mesh else find_face_mesh(stage)
+    if not mesh_prim.IsA(UsdGeom.Mesh):
+        raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()} is a {mesh_prim.GetTypeName() or 'typeless prim'}, expected a Mesh")
+    skull_prim = mesh_prim.GetParent()
+    if not skull_prim.HasAPI(schema.SKULL_API):
+        skull_prim = None
+    time_codes = select_time_codes(stage, mesh_prim, frames)
+    performance = read_performance(stage, mesh_prim, skull_prim, time_codes)
+    source = TakeSource(
+        path=Path(path),
+        stage=stage,
+        mesh_path=str(mesh_prim.GetPath()),
+        skull_path=str(skull_prim.GetPath()) if skull_prim else None,
+        timing=Timing.from_stage(stage),
+        layer_identifiers=tuple(layer.identifier for layer in stage.GetLayerStack(includeSessionLayers=False)),
+    )
+    return performance, source
+
+
+def find_face_mesh(stage: Usd.Stage) -> Usd.Prim:
+    """The one Mesh carrying FacedynFaceAPI."""
+    faces = [prim for prim in stage.Traverse() if prim.HasAPI(schema.FACE_API)]
+    if not faces:
+        raise TakeError(
+            f"{layer_name(stage)}: no Mesh with FacedynFaceAPI; convert the capture with `usdfacedyn import` first"
+        )
+    if len(faces) > 1:
+        paths = ", ".join(str(p.GetPath()) for p in faces)
+        raise TakeError(f"{layer_name(stage)}: several faces ({paths}); choose one with --mesh")
+    return faces[0]
+
+
+def find_animated_meshes(stage: Usd.Stage) -> list[Usd.Prim]:
+    """Every Mesh whose points have more than one time sample."""
+    return [
+        prim
+        for prim in stage.Traverse()
+        if prim.IsA(UsdGeom.Mesh) and UsdGeom.Mesh(prim).GetPointsAttr().GetNumTimeSamples() > 1
+    ]
+
+
+def select_time_codes(stage: Usd.Stage, mesh_prim: Usd.Prim, frames: tuple[float, float] | None) -> np.ndarray:
+    """The points' time samples, restricted to `frames` (first, last), as float64."""
+    samples = np.asarray(UsdGeom.Mesh(mesh_prim).GetPointsAttr().GetTimeSamples(), dtype=np.float64)
+    if samples.size == 0:
+        raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()}.points has no time samples (not an animated mesh)")
+    if frames is not None:
+        first, last = frames
+        samples = samples[(samples >= first) & (samples <= last)]
+        if samples.size == 0:
+            raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()} has no frames in {first:g}:{last:g}")
+    return samples
+
+
+def read_performance(
+    stage: Usd.Stage, mesh_prim: Usd.Prim, skull_prim: Usd.Prim | None, time_codes: np.ndarray
+) -> Performance:
+    where = f"{layer_name(stage)}: {mesh_prim.GetPath()}"
+    mesh = UsdGeom.Mesh(mesh_prim)
+    topology = read_topology(mesh, where)
+    points = read_vec3_samples(mesh.GetPointsAttr(), time_codes, where + ".points")
+    if points.shape[1] != topology.point_count:
+        raise TakeError(f"{where}: {points.shape[1]} points but the topology indexes {topology.point_count}")
+    ensure_finite(points, time_codes, where + ".points")
+    timing = Timing.from_stage(stage)
+    face = schema.FaceAttributes.read(mesh_prim)
+    offsets = None
+    offsets_attr = mesh_prim.GetAttribute(schema.OFFSETS_ATTR)
+    if offsets_attr and offsets_attr.HasAuthoredValue():
+        offsets = read_vec3_samples(offsets_attr, time_codes, where + "." + schema.OFFSETS_ATTR)
+        if offsets.shape != points.shape:
+            raise TakeError(f"{where}: {offsets.shape[1]} dynamics offsets per frame for {points.shape[1]} points")
+    translate = orient = solve_error = landmarks = None
+    if skull_prim is not None:
+        translate, orient = read_skull_transforms(skull_prim, time_codes)
+        skull = schema.SkullAttributes.read(skull_prim)
+        landmarks = skull.landmarks
+        solve_error = read_float_samples(skull_prim.GetAttribute(schema.SOLVE_ERROR_ATTR), time_codes)
+    return Performance(
+        points=points,
+        frames=time_codes,
+        fps=timing.time_codes_per_second,
+        topology=topology,
+        skull_translate=translate,
+        skull_orient=orient,
+        uvs=read_uvs(mesh),
+        rest_points=face.rest_points,
+        rigid_weights=face.rigid_weights,
+        face_vertices=face.face_vertices,
+        skin_samples=face.skin_samples,
+        landmarks=landmarks,
+        offsets=offsets,
+        solve_error=solve_error,
+        role=face.role,
+        meters_per_unit=timing.meters_per_unit,
+        up_axis=timing.up_axis,
+    )
+
+
+def read_topology(mesh: UsdGeom.Mesh, where: str) -> Topology:
+    """faceVertexCounts/Indices, which must not change over time."""
+    counts_attr, indices_attr = mesh.GetFaceVertexCountsAttr(), mesh.GetFaceVertexIndicesAttr()
+    counts = np.asarray(counts_attr.Get(Usd.TimeCode.EarliestTime()) or [], dtype=np.int32)
+    indices = np.asarray(indices_attr.Get(Usd.TimeCode.EarliestTime()) or [], dtype=np.int32)
+    if counts.size == 0 or indices.size == 0:
+        raise TakeError(f"{where}: the mesh has no faceVertexCounts/faceVertexIndices")
+    for attr, first in ((counts_attr, counts), (indices_attr, indices)):
+        for t in attr.GetTimeSamples()[1:]:
+            if not np.array_equal(np.asarray(attr.Get(t)), first):
+                raise TakeError(f"{where}: {attr.GetName()} changes at time {t:g}; facedyn needs one topology for the whole take")
+    if counts.sum() != indices.size or (counts < 3).any() or indices.min() < 0:
+        raise TakeError(f"{where}: inconsistent topology (faceVertexCounts do not match faceVertexIndices)")
+    return Topology(counts, indices)
+
+
+def read_vec3_samples(attr: Usd.Attribute, time_codes: np.ndarray, where: str) -> np.ndarray:
+    """(F, N, 3) float32 from one whole-array Get per frame; every frame must have N values."""
+    query = Usd.AttributeQuery(attr)
+    frames = [np.asarray(query.Get(float(t)), dtype=np.float32) for t in time_codes]
+    counts = {f.shape for f in frames}
+    if len(counts) != 1:
+        sizes = [f.shape[0] if f.ndim == 2 else 0 for f in frames]
+        bad = int(np.argmax(np.asarray(sizes) != sizes[0]))
+        raise TakeError(f"{where}: {sizes[bad]} values at time {time_codes[bad]:g} but {sizes[0]} at {time_codes[0]:g}; the point count must not change")
+    out = np.stack(frames)
+    if out.ndim != 3 or out.shape[2] != 3:
+        raise TakeError(f"{where}: expected 3-vectors, got values of shape {out.shape[1:]}")
+    return out
+
+
+def read_float_samples(attr: Usd.Attribute, time_codes: np.ndarray) -> np.ndarray | None:
+    if not attr or not attr.HasAuthoredValue():
+        return None
+    query = Usd.AttributeQuery(attr)
+    return np.array([query.Get(float(t)) for t in time_codes], dtype=np.float32)
+
+
+def read_skull_transforms(skull_prim: Usd.Prim, time_codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame translate (F,3) and orient (F,4, w first) of the skull's translate/orient ops."""
+    translate_attr = skull_prim.GetAttribute("xformOp:translate")
+    orient_attr = skull_prim.GetAttribute("xformOp:orient")
+    f = len(time_codes)
+    translate = np.zeros((f, 3))
+    orient = np.tile([1.0, 0.0, 0.0, 0.0], (f, 1))
+    if translate_attr and translate_attr.HasAuthoredValue():
+        query = Usd.AttributeQuery(translate_attr)
+        translate = np.array([query.Get(float(t)) for t in time_codes], dtype=np.float64)
+    if orient_attr and orient_attr.HasAuthoredValue():
+        query = Usd.AttributeQuery(orient_attr)
+        orient = np.array([_quat_wxyz(query.Get(float(t))) for t in time_codes], dtype=np.float64)
+    if not (np.isfinite(translate).all() and np.isfinite(orient).all()):
+        raise TakeError(f"{skull_prim.GetStage().GetRootLayer().realPath}: {skull_prim.GetPath()} has non-finite skull transforms")
+    return translate, orient
+
+
+def _quat_wxyz(q) -> tuple[float, float, float, float]:
+    imaginary = q.GetImaginary()
+    return (q.GetReal(), imaginary[0], imaginary[1], imaginary[2])
+
+
+def read_uvs(mesh: UsdGeom.Mesh) -> UVs | None:
+    primvar = UsdGeom.PrimvarsAPI(mesh.GetPrim()).GetPrimvar("st")
+    if not primvar or not primvar.HasAuthoredValue():
+        return None
+    values = np.asarray(primvar.Get(), dtype=np.float32)
+    indices = np.asarray(primvar.GetIndices(), dtype=np.int32) if primvar.IsIndexed() else None
+    return UVs(values=values, indices=indices, interpolation=str(primvar.GetInterpolation()))
+
+
+def ensure_finite(values: np.ndarray, time_codes: np.ndarray, where: str) -> None:
+    finite = np.isfinite(values).all(axis=(1, 2))
+    if not finite.all():
+        bad = int(np.argmin(finite))
+        raise TakeError(f"{where}: NaN or infinite values at time {time_codes[bad]:g}")
+

@@ -1,0 +1,137 @@
+"""`usdfacedyn validate`: USD's own validators plus facedyn's checks of a take.
+
+facedyn's checks are the promises its layers make (DESIGN.md): offsets have one vector per
+point, every frame's extent bounds its points, every layer of the stack agrees on timing,
+and every frame a layer covers is authored.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+from pxr import Usd, UsdGeom, UsdValidation
+
+from facedyn.usd import schema
+from facedyn.usd.errors import TakeError
+from facedyn.usd.stage import open_stage
+from facedyn.usd.take import find_face_mesh
+
+# Validators about packaging that do not apply to plain layer files.
+_SKIPPED_USD_VALIDATORS = {"usdUtilsValidators:UsdzPackageValidator", "usdUtilsValidators:PackageEncapsulationValidator"}
+
+
+@dataclass
+class Finding:
+    severity: str  # "error" or "warning"
+    validator: str
+    message: str
+
+
+def validate_take(path: str | os.PathLike) -> list[Finding]:
+    stage = open_stage(path)
+    findings = usd_findings(stage)
+    try:
+        face = find_face_mesh(stage)
+    except TakeError as exc:
+        return findings + [Finding("error", "facedyn:FaceMesh", str(exc))]
+    findings += timing_findings(stage)
+    findings += face_findings(stage, face)
+    return findings
+
+
+def usd_findings(stage: Usd.Stage) -> list[Finding]:
+    registry = UsdValidation.ValidationRegistry()
+    validators = [v for v in registry.GetOrLoadAllValidators() if v.GetMetadata().name not in _SKIPPED_USD_VALIDATORS]
+    errors = UsdValidation.ValidationContext(validators).Validate(stage)
+    findings = []
+    for error in errors:
+        if error.HasNoError():
+            continue
+        severity = "error" if error.GetType() == UsdValidation.ValidationErrorType.Error else "warning"
+        findings.append(Finding(severity, f"usd:{error.GetName()}", error.GetMessage()))
+    return findings
+
+
+def timing_findings(stage: Usd.Stage) -> list[Finding]:
+    """Every layer that states a rate must state the root's rate."""
+    root = stage.GetRootLayer()
+    expected = (stage.GetTimeCodesPerSecond(), stage.GetFramesPerSecond())
+    findings = []
+    for layer in stage.GetLayerStack(includeSessionLayers=False):
+        if layer == root:
+            continue
+        for label, has, value, want in (
+            ("timeCodesPerSecond", layer.HasTimeCodesPerSecond(), layer.timeCodesPerSecond, expected[0]),
+            ("framesPerSecond", layer.HasFramesPerSecond(), layer.framesPerSecond, expected[1]),
+        ):
+            if has and value != want:
+                findings.append(Finding("error", "facedyn:Timing", f"{layer.identifier}: {label} {value:g}, the take says {want:g}"))
+    return findings
+
+
+def face_findings(stage: Usd.Stage, face: Usd.Prim) -> list[Finding]:
+    where = str(face.GetPath())
+    mesh = UsdGeom.Mesh(face)
+    points_attr = mesh.GetPointsAttr()
+    frames = points_attr.GetTimeSamples()
+    findings = []
+    if not frames:
+        return [Finding("error", "facedyn:Frames", f"{where}.points has no time samples")]
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+    if counts.sum() != indices.size:
+        findings.append(Finding("error", "facedyn:Topology", f"{where}: faceVertexCounts sum {counts.sum()} != {indices.size} indices"))
+    offsets_attr = face.GetAttribute(schema.OFFSETS_ATTR)
+    has_offsets = bool(offsets_attr and offsets_attr.HasAuthoredValue())
+    if has_offsets:
+        interpolation = UsdGeom.Primvar(offsets_attr).GetInterpolation()
+        if interpolation != UsdGeom.Tokens.vertex:
+            findings.append(Finding("error", "facedyn:Offsets", f"{where}: dynamicsOffset interpolation is {interpolation}, expected vertex"))
+        missing = sorted(set(frames) - set(offsets_attr.GetTimeSamples()))
+        if missing:
+            findings.append(Finding("error", "facedyn:Offsets", f"{where}: no dynamicsOffset at {len(missing)} frame(s), first {missing[0]:g}"))
+    extent_attr = mesh.GetExtentAttr()
+    points_q, extent_q = Usd.AttributeQuery(points_attr), Usd.AttributeQuery(extent_attr)
+    offsets_q = Usd.AttributeQuery(offsets_attr) if has_offsets else None
+    bad_extent = bad_offsets = bad_points = None
+    for t in frames:
+        points = np.asarray(points_q.Get(t), dtype=np.float64)
+        if bad_points is None and (points.size == 0 or not np.isfinite(points).all() or indices.size and indices.max() >= len(points)):
+            bad_points = t
+        extent = extent_q.Get(t)
+        if bad_extent is None and points.size and (
+            extent is None or not np.allclose(np.asarray(extent), [points.min(0), points.max(0)], atol=1e-4, rtol=1e-5)
+        ):
+            bad_extent = t
+        if offsets_q is not None and bad_offsets is None:
+            offsets = offsets_q.Get(t)
+            if offsets is not None and len(offsets) != len(points):
+                bad_offsets = (t, len(offsets), len(points))
+    if bad_points is not None:
+        findings.append(Finding("error", "facedyn:Points", f"{where}: points at time {bad_points:g} are empty, non-finite or fewer than the topology indexes"))
+    if bad_extent is not None:
+        findings.append(Finding("error", "facedyn:Extent", f"{where}: extent at time {bad_extent:g} does not bound that frame's points"))
+    if bad_offsets is not None:
+        t, n_off, n_pts = bad_offsets
+        findings.append(Finding("error", "facedyn:Offsets", f"{where}: {n_off} dynamicsOffset values for {n_pts} points at time {t:g}"))
+    findings += skull_findings(face.GetParent(), frames)
+    return findings
+
+
+def skull_findings(skull: Usd.Prim, frames: list[float]) -> list[Finding]:
+    """A skull that moves must be authored at every frame the face covers."""
+    if not skull.HasAPI(schema.SKULL_API):
+        return []
+    findings = []
+    for name in ("xformOp:translate", "xformOp:orient"):
+        attr = skull.GetAttribute(name)
+        samples = attr.GetTimeSamples() if attr else []
+        if samples:
+            missing = sorted(set(frames) - set(samples))
+            if missing:
+                findings.append(Finding("error", "facedyn:Skull", f"{skull.GetPath()}.{name}: not authored at {len(missing)} frame(s), first {missing[0]:g}"))
+    order = UsdGeom.Xformable(skull).GetXformOpOrderAttr().Get()
+    if order is not None and [str(o) for o in order] != ["xformOp:translate", "xformOp:orient"]:
+        findings.append(Finding("warning", "facedyn:Skull", f"{skull.GetPath()}: xformOpOrder {list(order)} is not [translate, orient]"))
+    return findings
