@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import linalg as spla
 
 from facedyn.geometry import dualquat
 
@@ -74,15 +75,21 @@ def transform_points_vjp(dq: np.ndarray, points: np.ndarray, grad_points: np.nda
     return dualquat.rotation_translation_vjp(dq, g_rot, g_trans)
 
 
-def fit_controls(basis, dq: np.ndarray) -> np.ndarray:
+def fit_controls(basis, dq: np.ndarray, smoothing: float = 1e-6) -> np.ndarray:
     """Least-squares controls whose blend reproduces per-frame dual quaternions dq.
 
     dq is sign-made-continuous first; the fit is linear, so the blend equals dq up to the
-    renormalization SDLB applies.
+    renormalization SDLB applies. A small second-difference penalty on the controls keeps
+    the fit well posed where few frames fall under a control's support.
     """
     dq = dualquat.make_continuous(np.asarray(dq, dtype=np.float64))
     if dq.ndim != 2 or dq.shape[0] != basis.shape[0]:
         raise ValueError(f"{dq.shape} dual quaternions for a basis of {basis.shape[0]} frames")
     b = sp.csr_matrix(basis)
-    normal = (b.T @ b).tocsc()
-    return np.asarray(sp.linalg.spsolve(normal, np.asarray(b.T @ dq))).reshape(-1, 8)
+    n = b.shape[1]
+    normal = b.T @ b
+    if n >= 3:
+        second = sp.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(n - 2, n))
+        normal = normal + smoothing * (second.T @ second)
+    normal = normal + 1e-12 * sp.identity(n)
+    return np.asarray(spla.spsolve(normal.tocsc(), np.asarray(b.T @ dq))).reshape(-1, 8)

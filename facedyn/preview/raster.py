@@ -3,7 +3,7 @@
 Render farms and CI have no GPU context, so review images are rasterized on arrays. Every
 triangle is expanded into the pixels of its bounding box as one flat (ragged) batch, the
 pixels inside are found with barycentric tests, and the front-most triangle per pixel is
-chosen with a single ``np.minimum.at`` over packed (depth, candidate) keys. The same
+chosen with ``np.minimum.at`` over packed (depth, triangle) keys. The same
 `rasterize` bakes uv maps (`facedyn.preview.uvmaps`), where the "screen" is a uv tile.
 
 Conventions: pixel (x, y) has its centre at (x + 0.5, y + 0.5), y grows downward; a pixel
@@ -24,6 +24,7 @@ from facedyn.preview.normals import VertexNormals, face_normals, normalize
 _EPS = 1e-5
 _NEAR = 1e-6
 _NO_KEY = np.iinfo(np.int64).max
+_BATCH = 1 << 22
 
 
 @dataclass(frozen=True)
@@ -132,9 +133,15 @@ def rasterize(
         raise ValueError(f"xy must be (N, 2), got {xy.shape}")
     if tris.ndim != 2 or tris.shape[1] != 3:
         raise ValueError(f"triangles must be (T, 3), got {tris.shape}")
-    inv_z = np.ones(len(xy)) if depth is None else 1.0 / np.maximum(np.asarray(depth, dtype=np.float64), _NEAR)
-    if inv_z.shape != (len(xy),):
-        raise ValueError(f"depth must be ({len(xy)},), got {np.shape(depth)}")
+    if tris.size and (tris.min() < 0 or tris.max() >= len(xy)):
+        raise ValueError(f"triangle indices must lie in [0, {len(xy)}), got [{tris.min()}, {tris.max()}]")
+    if depth is None:
+        inv_z = np.ones(len(xy))
+    else:
+        depth = np.asarray(depth, dtype=np.float64)
+        if depth.shape != (len(xy),):
+            raise ValueError(f"depth must be ({len(xy)},), got {depth.shape}")
+        inv_z = 1.0 / np.maximum(depth, _NEAR)
 
     x, y, iz = xy[tris, 0], xy[tris, 1], inv_z[tris]  # (T, 3) each
     area2 = (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (x[:, 2] - x[:, 0]) * (y[:, 1] - y[:, 0])
@@ -144,16 +151,16 @@ def rasterize(
     y1 = np.minimum(np.floor(np.maximum(np.maximum(y[:, 0], y[:, 1]), y[:, 2]) - 0.5), height - 1)
     keep = (np.abs(area2) > 1e-12) & (x1 >= x0) & (y1 >= y0)
     if depth is not None:
-        keep &= np.all(np.asarray(depth)[tris] > _NEAR, axis=1)
+        keep &= np.all(depth[tris] > _NEAR, axis=1)
     ids = np.flatnonzero(keep)
     x, y, iz, area2 = x[ids], y[ids], iz[ids], area2[ids]
-    x0, y0 = x0[ids], y0[ids]
-    bw = (x1[ids] - x0 + 1).astype(np.int64)
-    bh = (y1[ids] - y0 + 1).astype(np.int64)
+    x0, y0 = x0[ids].astype(np.int64), y0[ids].astype(np.int64)
+    bw = x1[ids].astype(np.int64) - x0 + 1
+    bh = y1[ids].astype(np.int64) - y0 + 1
 
     # Barycentrics of corners 0 and 1 and 1/z are affine in (x, y): rows hold the value
     # at the box's first pixel centre and the steps per pixel in x and in y, so that each
-    # candidate pixel needs only small offsets (exact in float32).
+    # pixel needs only small offsets from its box corner (accurate in float32).
     cx, cy = x0 + 0.5, y0 + 0.5
     coef = np.empty((9, len(ids)))
     for k, (i, j) in enumerate(((1, 2), (2, 0))):
@@ -166,12 +173,36 @@ def rasterize(
     coef[8] = dz0 * coef[2] + dz1 * coef[5]
     coef = coef.astype(np.float32)
 
+    # Depth test in batches of about _BATCH box pixels, so that memory stays bounded when
+    # a few triangles cover a large uv tile. Keys pack the depth (nearer, i.e. larger
+    # positive 1/z, i.e. larger float bits, first) above the triangle's index (lower
+    # first), so that one minimum per pixel picks the winner deterministically.
+    zbuf = np.full(width * height, _NO_KEY, dtype=np.int64)
     counts = bw * bh
+    ends = np.cumsum(counts)
+    cuts = np.unique(np.searchsorted(ends, np.arange(_BATCH, ends[-1] if len(ends) else 0, _BATCH), side="right"))
+    for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(ids)]):
+        if hi > lo:
+            pix, inv_depth, tri = _cover(coef[:, lo:hi], x0[lo:hi], y0[lo:hi], bw[lo:hi], counts[lo:hi], width)
+            bits = np.maximum(inv_depth, np.float32(1e-30)).view(np.int32).astype(np.int64)
+            np.minimum.at(zbuf, pix, (-bits << 32) + (tri + lo))
+
+    pixel = np.flatnonzero(zbuf != _NO_KEY)
+    tri = zbuf[pixel] & 0xFFFFFFFF
+    dx = (pixel % width - x0[tri]).astype(np.float32)
+    dy = (pixel // width - y0[tri]).astype(np.float32)
+    c = coef[:6, tri]
+    bary = np.empty((len(pixel), 3), dtype=np.float32)
+    bary[:, 0] = c[0] + c[1] * dx + c[2] * dy
+    bary[:, 1] = c[3] + c[4] * dx + c[5] * dy
+    bary[:, 2] = 1.0 - bary[:, 0] - bary[:, 1]
+    return Fragments(pixel, ids[tri], bary, int(width), int(height))
+
+
+def _cover(coef, x0, y0, bw, counts, width):
+    """Pixels whose centres lie inside the given triangles: flat pixel index, 1/z, triangle."""
     total = int(counts.sum())
-    if total >= 2**32:
-        raise ValueError(f"{total} candidate pixels exceed the rasterizer's 2**32 limit; lower the resolution")
-    starts = np.cumsum(counts) - counts
-    local = np.arange(total, dtype=np.int64) - np.repeat(starts, counts)
+    local = np.arange(total, dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
     w_rep = np.repeat(bw, counts)
     dy = local // w_rep
     dx = local - dy * w_rep
@@ -179,26 +210,12 @@ def rasterize(
     c = np.repeat(coef[:6], counts, axis=1)
     b0 = c[0] + c[1] * dxf + c[2] * dyf
     b1 = c[3] + c[4] * dxf + c[5] * dyf
-    cand = np.flatnonzero((b0 >= -_EPS) & (b1 >= -_EPS) & (b0 + b1 <= 1.0 + _EPS))
-
-    owner = np.repeat(np.arange(len(ids), dtype=np.int64), counts)[cand]
-    dx, dy, dxf, dyf = dx[cand], dy[cand], dxf[cand], dyf[cand]
-    pix = (y0.astype(np.int64)[owner] + dy) * width + x0.astype(np.int64)[owner] + dx
-    z = coef[6:9, owner]
-    inv_depth = z[0] + z[1] * dxf + z[2] * dyf
-    # Packed key: nearer (larger positive 1/z, so larger float bits) first, then the
-    # lower candidate, so that one minimum per pixel picks the winner deterministically.
-    bits = np.maximum(inv_depth, np.float32(1e-30)).view(np.int32).astype(np.int64)
-    keys = (-bits << 32) + np.arange(len(cand), dtype=np.int64)
-    zbuf = np.full(width * height, _NO_KEY, dtype=np.int64)
-    np.minimum.at(zbuf, pix, keys)
-    pixel = np.flatnonzero(zbuf != _NO_KEY)
-    win = zbuf[pixel] & 0xFFFFFFFF
-    bary = np.empty((len(win), 3), dtype=np.float32)
-    bary[:, 0] = b0[cand[win]]
-    bary[:, 1] = b1[cand[win]]
-    bary[:, 2] = 1.0 - bary[:, 0] - bary[:, 1]
-    return Fragments(pixel, ids[owner[win]], bary, int(width), int(height))
+    inside = np.flatnonzero((b0 >= -_EPS) & (b1 >= -_EPS) & (b0 + b1 <= 1.0 + _EPS))
+    tri = np.repeat(np.arange(len(counts), dtype=np.int64), counts)[inside]
+    dx, dy = dx[inside], dy[inside]
+    pix = (y0[tri] + dy) * width + x0[tri] + dx
+    z = coef[6:9, tri]
+    return pix, z[0] + z[1] * dxf[inside] + z[2] * dyf[inside], tri
 
 
 class Renderer:

@@ -112,9 +112,7 @@ def _import_usd(path: Path, request: Request, progress: Progress) -> Result:
     where = f"{layer_name(stage)}: {mesh_prim.GetPath()}"
     mesh = UsdGeom.Mesh(mesh_prim)
     topology = read_topology(mesh, where)
-    progress.start("import: read points", 1)
     points = read_vec3_samples(mesh.GetPointsAttr(), time_codes, where + ".points").astype(np.float64)
-    progress.finish()
     ensure_finite(points, time_codes, where + ".points")
     if points.shape[1] != topology.point_count:
         from facedyn.usd.errors import TakeError

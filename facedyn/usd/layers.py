@@ -164,8 +164,11 @@ def check_writable(path: Path) -> None:
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise TakeError(f"{path}: output folder {folder} does not exist")
-    if not os.access(folder, os.W_OK):
-        raise TakeError(f"{path}: output folder {folder} is not writable")
+    try:  # a real probe: permission bits do not tell the whole story (root, read-only mounts)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError:
+        raise TakeError(f"{path}: output folder {folder} is not writable") from None
     if path.is_dir():
         raise TakeError(f"{path}: is a folder, expected a file name")
     if not Sdf.FileFormat.FindByExtension(path.suffix.lstrip(".")):

@@ -1,0 +1,322 @@
+"""Skull motion sources: procedural gaits, a vibrating platform, stillness and mocap.
+
+The soft-tissue simulator needs skull trajectories with realistic accelerations, because
+they are what make a face jiggle. Every source returns a `SkullTrajectory`
+(``world = R(orient) @ skull + translate``, cm, Y up, the skull facing +Z at the identity
+like the face rig), sampled at ``fps`` from time 0, ``round(duration_s * fps)`` frames.
+
+The gaits start at the origin and advance along +Z. Their magnitudes follow gait studies of
+the head: walking at ~2 steps/s bobs 4-5 cm with vertical acceleration peaks of ~0.4 g;
+running at ~2.8 steps/s has a flight phase (free fall, -1 g) and ~1 g stance peaks;
+hopping at ~2 hops/s has ~1.3 g landing peaks. Each take draws its amplitudes, phases and a
+slow tempo drift from ``seed``, so takes differ but repeat exactly.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from os import PathLike
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from facedyn.geometry import quaternion
+from facedyn.io.resample import bracket, time_grid
+
+G_CM_S2 = 980.665
+"""Standard gravity in cm/s^2."""
+
+
+@dataclass(frozen=True, eq=False)
+class SkullTrajectory:
+    """Rigid skull motion sampled at `fps` from time 0: translate (F,3) cm, orient (F,4) wxyz."""
+
+    translate: np.ndarray
+    orient: np.ndarray
+    fps: float
+
+    def __post_init__(self) -> None:
+        translate = np.array(self.translate, dtype=np.float64)
+        orient = np.array(self.orient, dtype=np.float64)
+        if translate.ndim != 2 or translate.shape[1] != 3 or len(translate) == 0:
+            raise ValueError(f"translate must be (frames >= 1, 3), got {translate.shape}")
+        if orient.shape != (len(translate), 4):
+            raise ValueError(f"orient must be ({len(translate)}, 4) to match translate, got {orient.shape}")
+        if not (np.isfinite(translate).all() and np.isfinite(orient).all()):
+            raise ValueError("translate and orient must be finite")
+        norms = np.linalg.norm(orient, axis=1)
+        if np.abs(norms - 1.0).max() > 1e-6:
+            raise ValueError(f"orient must hold unit quaternions, norms range {norms.min():.6g}..{norms.max():.6g}")
+        fps = float(self.fps)
+        if not (np.isfinite(fps) and fps > 0):
+            raise ValueError(f"fps must be positive, got {self.fps}")
+        orient /= norms[:, None]
+        translate.flags.writeable = False
+        orient.flags.writeable = False
+        object.__setattr__(self, "translate", translate)
+        object.__setattr__(self, "orient", orient)
+        object.__setattr__(self, "fps", fps)
+
+    @property
+    def frame_count(self) -> int:
+        return self.translate.shape[0]
+
+    @property
+    def times(self) -> np.ndarray:
+        """(F,) seconds of each frame."""
+        return np.arange(self.frame_count) / self.fps
+
+
+@dataclass(frozen=True)
+class Ramp:
+    """How a motion starts and stops: still for `before_s`, fades in over `in_s`, moves,
+    fades out over `out_s`, then still for `after_s` (e.g. to watch offsets decay)."""
+
+    in_s: float = 0.0
+    out_s: float = 0.0
+    before_s: float = 0.0
+    after_s: float = 0.0
+
+    def envelope(self, times: np.ndarray, duration_s: float) -> np.ndarray:
+        """Amplitude 0..1 per time; quintic fades keep accelerations continuous."""
+        parts = (self.in_s, self.out_s, self.before_s, self.after_s)
+        if min(parts) < 0:
+            raise ValueError(f"ramp durations must be >= 0, got {self}")
+        if sum(parts) > duration_s + 1e-9:
+            raise ValueError(f"ramp takes {sum(parts)} s, longer than the {duration_s} s motion")
+        rise = _fade(times - self.before_s, self.in_s)
+        fall = _fade(duration_s - self.after_s - times, self.out_s)
+        return rise * fall
+
+
+def _fade(x: np.ndarray, width: float) -> np.ndarray:
+    """0 for x <= 0, 1 for x >= width, C2 smoothstep between (a step when width is 0)."""
+    if width == 0:
+        return (x >= 0).astype(np.float64)
+    u = np.clip(x / width, 0.0, 1.0)
+    return u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
+
+
+@dataclass(frozen=True)
+class _Gait:
+    """One gait's nominal head motion; amplitudes are per-component peaks."""
+
+    step_hz: float
+    speed_cm_s: float
+    flight: float  # fraction of each step in the air (free fall); 0 walks with a sinusoidal bob
+    bob_cm: float  # vertical bob when walking (flight gaits follow ballistics instead)
+    surge_cm: float  # forward oscillation at the step rate
+    sway_cm: float  # lateral oscillation at the stride rate (half the step rate)
+    pitch_deg: float  # nodding at the step rate
+    yaw_deg: float  # at the stride rate
+    roll_deg: float  # at the stride rate
+
+
+_WALK = _Gait(step_hz=2.0, speed_cm_s=130.0, flight=0.0, bob_cm=2.1, surge_cm=0.8, sway_cm=2.0, pitch_deg=2.0, yaw_deg=2.0, roll_deg=1.5)
+_RUN = _Gait(step_hz=2.8, speed_cm_s=300.0, flight=0.4, bob_cm=0.0, surge_cm=1.0, sway_cm=1.5, pitch_deg=3.0, yaw_deg=3.0, roll_deg=2.0)
+_HOP = _Gait(step_hz=2.0, speed_cm_s=40.0, flight=0.46, bob_cm=0.0, surge_cm=1.0, sway_cm=0.5, pitch_deg=4.0, yaw_deg=1.0, roll_deg=1.0)
+
+
+def walk(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, step_hz: float = 2.0,
+         speed_cm_s: float = 130.0, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Walking: ~2 steps/s, 4-5 cm bob, vertical acceleration peaks ~0.4 g."""
+    return _gait(replace(_WALK, step_hz=step_hz, speed_cm_s=speed_cm_s), duration_s, fps, seed, ramp)
+
+
+def run(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, step_hz: float = 2.8,
+        speed_cm_s: float = 300.0, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Running: ~2.8 steps/s, free fall between steps, ~1 g stance peaks."""
+    return _gait(replace(_RUN, step_hz=step_hz, speed_cm_s=speed_cm_s), duration_s, fps, seed, ramp)
+
+
+def hop(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, hop_hz: float = 2.0,
+        speed_cm_s: float = 40.0, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Hopping: ~2 hops/s, ~6 cm flights, 1.2-1.5 g landing peaks."""
+    return _gait(replace(_HOP, step_hz=hop_hz, speed_cm_s=speed_cm_s), duration_s, fps, seed, ramp)
+
+
+def platform(freq_hz: float, amplitude_cm: float, duration_s: float = 4.0, fps: float = 120.0,
+             seed: int = 0, *, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Standing on a vertically vibrating platform (the papers' corpus uses 6-11 Hz).
+
+    The vertical sinusoid has peak `amplitude_cm`; real platforms and bodies add small
+    horizontal motion (5 % of the amplitude) and rocking (0.3 degrees per cm of amplitude)
+    at the same frequency, with phases drawn from `seed`.
+    """
+    if not freq_hz > 0:
+        raise ValueError(f"platform frequency must be positive, got {freq_hz} Hz")
+    if not amplitude_cm >= 0:
+        raise ValueError(f"platform amplitude must be >= 0, got {amplitude_cm} cm")
+    if not freq_hz < fps / 2:
+        raise ValueError(f"a {freq_hz} Hz platform needs fps above {2 * freq_hz}, got {fps}")
+    times = _times(duration_s, fps)
+    rng = np.random.default_rng(seed)
+    envelope = ramp.envelope(times, duration_s)
+    angle = 2 * np.pi * freq_hz * times
+    phases = rng.uniform(0.0, 2 * np.pi, 5)
+    translate = amplitude_cm * envelope[:, None] * np.stack(
+        [0.05 * np.sin(angle + phases[0]), np.sin(angle + phases[1]), 0.05 * np.sin(angle + phases[2])], axis=1
+    )
+    rock = np.radians(0.3) * amplitude_cm * envelope
+    orient = _yaw_pitch_roll(np.zeros_like(times), rock * np.sin(angle + phases[3]), rock * np.sin(angle + phases[4]))
+    return SkullTrajectory(translate, orient, fps)
+
+
+def still(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, sway_cm: float = 0.0) -> SkullTrajectory:
+    """A head at rest at the origin; `sway_cm` > 0 adds slow postural sway drawn from `seed`."""
+    if not sway_cm >= 0:
+        raise ValueError(f"sway must be >= 0, got {sway_cm} cm")
+    times = _times(duration_s, fps)
+    rng = np.random.default_rng(seed)
+    translate = sway_cm * np.stack([_drift(rng, times), 0.2 * _drift(rng, times), _drift(rng, times)], axis=1)
+    return SkullTrajectory(translate, quaternion.identity((len(times),)), fps)
+
+
+def from_bvh(path: str | PathLike, joint: str = "Head", duration_s: float | None = None, fps: float | None = None,
+             seed: int | None = None, *, units_to_cm: float | None = None, rest_forward: str = "+z",
+             rest_up: str = "+y") -> SkullTrajectory:
+    """A real skull trajectory from motion capture (see facedyn.io.bvh.head_trajectory).
+
+    `fps` resamples (None keeps the file's rate); `duration_s` cuts a window, from the
+    start when `seed` is None, else from a start drawn from `seed`.
+    """
+    from facedyn.io.bvh import head_trajectory  # deferred: io.bvh imports SkullTrajectory from here
+
+    trajectory = head_trajectory(path, joint, units_to_cm, rest_forward, rest_up)
+    if fps is not None:
+        trajectory = resample(trajectory, fps)
+    if duration_s is None:
+        return trajectory
+    frames = len(_times(duration_s, trajectory.fps))
+    if frames > trajectory.frame_count:
+        raise ValueError(f"{path}: holds {trajectory.frame_count / trajectory.fps:.2f} s, asked for {duration_s} s")
+    start = 0 if seed is None else int(np.random.default_rng(seed).integers(0, trajectory.frame_count - frames + 1))
+    window = slice(start, start + frames)
+    return SkullTrajectory(trajectory.translate[window], trajectory.orient[window], trajectory.fps)
+
+
+def resample(trajectory: SkullTrajectory, fps: float, method: str = "cubic") -> SkullTrajectory:
+    """Resample over the same time span: translation by cubic spline or linearly, rotation by slerp."""
+    if method not in ("cubic", "linear"):
+        raise ValueError(f"method must be 'cubic' or 'linear', got {method!r}")
+    times = trajectory.times
+    new_times = time_grid(0.0, times[-1], fps)
+    lo, hi, w = bracket(times, new_times)
+    if method == "cubic" and trajectory.frame_count >= 2:
+        translate = CubicSpline(times, trajectory.translate, axis=0)(new_times)
+    else:
+        translate = trajectory.translate[lo] * (1 - w)[:, None] + trajectory.translate[hi] * w[:, None]
+    orient = quaternion.make_continuous(quaternion.slerp(trajectory.orient[lo], trajectory.orient[hi], w))
+    return SkullTrajectory(translate, orient, fps)
+
+
+@dataclass(frozen=True, eq=False)
+class Kinematics:
+    """Finite-difference derivatives of a skull trajectory, each (F, 3), in world and skull axes.
+
+    Linear acceleration is the skull origin's (cm/s^2), without gravity; angular velocity
+    (rad/s) and acceleration (rad/s^2) are the skull's. Skull-axis values are the world
+    vectors rotated by R(orient)^T, the form a simulator in the skull frame needs.
+    """
+
+    linear_acceleration_world: np.ndarray
+    linear_acceleration_skull: np.ndarray
+    angular_velocity_world: np.ndarray
+    angular_velocity_skull: np.ndarray
+    angular_acceleration_world: np.ndarray
+    angular_acceleration_skull: np.ndarray
+
+
+def accelerations(trajectory: SkullTrajectory) -> Kinematics:
+    """Central differences inside, one-sided at the ends (the end accelerations repeat their neighbours)."""
+    if trajectory.frame_count < 3:
+        raise ValueError(f"accelerations need at least 3 frames, got {trajectory.frame_count}")
+    dt = 1.0 / trajectory.fps
+    x, q = trajectory.translate, trajectory.orient
+    linear = np.empty_like(x)
+    linear[1:-1] = (x[2:] - 2.0 * x[1:-1] + x[:-2]) / dt**2
+    linear[0], linear[-1] = linear[1], linear[-2]
+    # q[t+1] = dq * q[t-1] with dq a world-axis rotation over 2 dt.
+    omega = np.empty_like(x)
+    omega[1:-1] = quaternion.to_rotvec(quaternion.multiply(q[2:], quaternion.conjugate(q[:-2]))) / (2.0 * dt)
+    omega[0] = quaternion.to_rotvec(quaternion.multiply(q[1], quaternion.conjugate(q[0]))) / dt
+    omega[-1] = quaternion.to_rotvec(quaternion.multiply(q[-1], quaternion.conjugate(q[-2]))) / dt
+    alpha = np.gradient(omega, dt, axis=0)
+    inverse = quaternion.conjugate(q)
+    return Kinematics(
+        linear_acceleration_world=linear,
+        linear_acceleration_skull=quaternion.rotate(inverse, linear),
+        angular_velocity_world=omega,
+        angular_velocity_skull=quaternion.rotate(inverse, omega),
+        angular_acceleration_world=alpha,
+        angular_acceleration_skull=quaternion.rotate(inverse, alpha),
+    )
+
+
+def _times(duration_s: float, fps: float) -> np.ndarray:
+    if not (duration_s > 0 and fps > 0):
+        raise ValueError(f"duration_s and fps must be positive, got {duration_s} s at {fps} fps")
+    return np.arange(max(int(round(duration_s * fps)), 1)) / fps
+
+
+def _drift(rng: np.random.Generator, times: np.ndarray) -> np.ndarray:
+    """Smooth random wander within [-1, 1]: three slow (0.1-0.4 Hz) sinusoids."""
+    freqs = rng.uniform(0.1, 0.4, 3)[:, None]
+    phases = rng.uniform(0.0, 2 * np.pi, 3)[:, None]
+    return np.sin(2 * np.pi * freqs * times + phases).mean(axis=0)
+
+
+def _integral(values: np.ndarray, fps: float) -> np.ndarray:
+    """Cumulative trapezoid integral from time 0."""
+    return np.concatenate([[0.0], np.cumsum(0.5 * (values[1:] + values[:-1]))]) / fps
+
+
+def _ballistic(phase: np.ndarray, flight: float, step_hz: float) -> np.ndarray:
+    """Head height (cm) over steps with a free-fall flight and a half-sine stance push.
+
+    Takeoff is at phase 0 with speed v0 = g Tf / 2; the stance lasts Ts and its upward
+    acceleration (pi v0 / Ts) sin(pi s / Ts) turns the landing speed -v0 into +v0, so the
+    height is C1 and periodic, and the stance peak is pi g Tf / (2 Ts).
+    """
+    period = 1.0 / step_hz
+    airborne, stance = flight * period, (1.0 - flight) * period
+    v0 = 0.5 * G_CM_S2 * airborne
+    t = np.mod(phase / (2 * np.pi), 1.0) * period
+    s = t - airborne
+    return np.where(
+        t < airborne,
+        v0 * t - 0.5 * G_CM_S2 * t * t,
+        -(v0 * stance / np.pi) * np.sin(np.pi * np.clip(s, 0.0, stance) / stance),
+    )
+
+
+def _gait(gait: _Gait, duration_s: float, fps: float, seed: int, ramp: Ramp) -> SkullTrajectory:
+    if not (gait.step_hz > 0 and gait.speed_cm_s >= 0):
+        raise ValueError(f"step rate must be positive and speed >= 0, got {gait.step_hz} Hz and {gait.speed_cm_s} cm/s")
+    times = _times(duration_s, fps)
+    rng = np.random.default_rng(seed)
+    envelope = ramp.envelope(times, duration_s)
+    tempo = gait.step_hz * (1.0 + 0.03 * _drift(rng, times))
+    phase = rng.uniform(0.0, 2 * np.pi) + 2 * np.pi * _integral(tempo, fps)
+    scale = rng.uniform(0.85, 1.15, 6)
+    shift = rng.uniform(0.0, 2 * np.pi, 6)
+
+    if gait.flight > 0:
+        vertical = _ballistic(phase, float(np.clip(gait.flight + rng.uniform(-0.02, 0.02), 0.05, 0.9)), gait.step_hz)
+    else:
+        vertical = gait.bob_cm * scale[0] * (np.cos(phase) + 0.08 * np.cos(2 * phase + shift[0]))
+    speed = gait.speed_cm_s * (1.0 + 0.05 * _drift(rng, times))
+    forward = _integral(speed * envelope, fps) + envelope * gait.surge_cm * scale[1] * np.sin(phase + shift[1])
+    lateral = envelope * gait.sway_cm * scale[2] * np.sin(0.5 * phase + shift[2])
+    translate = np.stack([lateral, envelope * vertical, forward], axis=1)
+
+    pitch = envelope * np.radians(gait.pitch_deg) * scale[3] * np.sin(phase + shift[3])
+    yaw = envelope * np.radians(gait.yaw_deg) * scale[4] * np.sin(0.5 * phase + shift[4])
+    roll = envelope * np.radians(gait.roll_deg) * scale[5] * np.sin(0.5 * phase + shift[5])
+    return SkullTrajectory(translate, _yaw_pitch_roll(yaw, pitch, roll), fps)
+
+
+def _yaw_pitch_roll(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
+    """(F, 4) orientations: yaw about Y, then pitch about X, then roll about Z (intrinsic)."""
+    axes = np.eye(3)
+    q = quaternion.multiply(quaternion.from_axis_angle(axes[1], yaw), quaternion.from_axis_angle(axes[0], pitch))
+    return quaternion.multiply(q, quaternion.from_axis_angle(axes[2], roll))

@@ -1,0 +1,213 @@
+"""usdfacedyn: import/inspect/validate end to end, flags, exit codes and bad input."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pxr import Usd
+
+from facedyn.cli import main
+from facedyn.usd.take import read_take
+
+from conftest import grid_mesh, write_mesh_cache
+
+
+def run(argv, capsys):
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exc:  # argparse's own usage errors
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_import_inspect_validate_ict_cache(tmp_path, ict_mesh_cache, capsys):
+    cache, frames = ict_mesh_cache
+    code, out, err = run(["import", cache, "-o", tmp_path / "capture.usdc", "-q"], capsys)
+    assert code == 0, err
+    root = tmp_path / "take.usda"
+    assert root.is_file() and "wrote" in out
+    perf, _ = read_take(root)
+    assert perf.points.shape == (24, 11248, 3) and perf.fps == 60.0
+    np.testing.assert_allclose(perf.points, frames, atol=1e-5)
+    assert perf.uvs is not None and perf.uvs.indices is not None
+    code, out, err = run(["inspect", root], capsys)
+    assert code == 0 and "capture.usdc" in out and "import" in out and "11248 points" in out
+    code, out, err = run(["inspect", root, "--json"], capsys)
+    described = json.loads(out)
+    assert [l["processor"] for l in described["layers"]] == ["take", "import"]
+    assert described["face"]["frames"] == 24
+    code, out, err = run(["validate", root], capsys)
+    assert code == 0, out
+    assert "0 error(s)" in out
+    assert Usd.SchemaRegistry().FindAppliedAPIPrimDefinition("FacedynFaceAPI") is not None
+
+
+def test_frames_json_dry_run_and_attach(tmp_path, grid_cache, capsys):
+    cache, frames = grid_cache
+    code, out, _ = run(["import", cache, "-o", tmp_path / "dry.usdc", "--dry-run"], capsys)
+    assert code == 0 and "would write" in out and not (tmp_path / "dry.usdc").exists()
+    code, out, _ = run(["import", cache, "-o", tmp_path / "capture.usdc", "--frames", "1002:1003", "--json"], capsys)
+    report = json.loads(out)
+    assert code == 0 and report["frame_count"] == 2 and report["frame_range"] == [1002.0, 1003.0]
+    perf, _ = read_take(tmp_path / "take.usda")
+    np.testing.assert_allclose(perf.points, frames[1:3])
+    # A second import attached as the strongest layer of the same root.
+    code, out, _ = run(["import", cache, "-o", tmp_path / "again.usdc", "--root", tmp_path / "other.usda", "--attach", tmp_path / "take.usda", "-q"], capsys)
+    assert code == 0
+    from pxr import Sdf
+
+    assert list(Sdf.Layer.OpenAsAnonymous(str(tmp_path / "take.usda")).subLayerPaths) == ["./again.usdc", "./capture.usdc"]
+
+
+def test_units_and_up_axis_are_made_canonical(tmp_path, capsys):
+    points, counts, indices = grid_mesh(3)
+    frames = np.stack([points, points + 1])
+    cache = write_mesh_cache(tmp_path / "zup.usda", frames, counts, indices, up_axis="Z", meters_per_unit=1.0)
+    code, _, err = run(["import", cache, "-o", tmp_path / "capture.usdc", "-q"], capsys)
+    assert code == 0, err
+    perf, _ = read_take(tmp_path / "take.usda")
+    expected = np.stack([frames[..., 0], frames[..., 2], -frames[..., 1]], axis=-1) * 100.0
+    np.testing.assert_allclose(perf.points, expected, atol=1e-4)
+    assert perf.meters_per_unit == 0.01 and perf.up_axis == "Y"
+
+
+def test_parameters_by_flag_and_by_p(tmp_path, grid_cache, capsys):
+    cache, _ = grid_cache
+    code, _, err = run(["import", cache, "-o", tmp_path / "c.usdc", "-p", "nope=1"], capsys)
+    assert code == 2 and "unknown parameter 'nope'" in err
+    code, _, err = run(["import", cache, "-o", tmp_path / "c.usdc", "-p", "fps"], capsys)
+    assert code == 2 and "KEY=VALUE" in err
+    code, _, err = run(["import", cache, "-o", tmp_path / "c.usdc", "--fps", "fast"], capsys)
+    assert code == 2 and "expected float" in err
+    code, _, err = run(["import", cache, "-o", tmp_path / "c.usdc", "--frames", "9:1"], capsys)
+    assert code == 2 and "empty frame range" in err
+
+
+def _assert_clean_failure(code, err, expected_code, *fragments):
+    assert code == expected_code, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+
+
+def test_bad_inputs_are_one_line_errors_and_leave_nothing(tmp_path, grid_cache, capsys):
+    cache, frames = grid_cache
+    out = tmp_path / "out"
+    out.mkdir()
+    target = out / "capture.usdc"
+
+    code, _, err = run(["import", tmp_path / "missing.usd", "-o", target], capsys)
+    _assert_clean_failure(code, err, 1, "missing.usd", "no such file")
+
+    junk = tmp_path / "junk.usda"
+    junk.write_text("this is not usd\n")
+    code, _, err = run(["import", junk, "-o", target], capsys)
+    _assert_clean_failure(code, err, 1, "junk.usda", "not a readable USD file")
+
+    code, _, err = run(["import", cache, "-o", target, "--mesh", "/Cache/Nope"], capsys)
+    _assert_clean_failure(code, err, 1, "grid_cache.usda", "no prim at /Cache/Nope")
+
+    points, counts, indices = grid_mesh(3)
+    still = write_mesh_cache(tmp_path / "still.usda", points[None], counts, indices)
+    from pxr import Usd as _Usd
+
+    stage = _Usd.Stage.Open(str(still))
+    attr = stage.GetPrimAtPath("/Cache/Geo/Face").GetAttribute("points")
+    value = attr.Get(1001)
+    attr.Clear()
+    attr.Set(value)
+    stage.Save()
+    code, _, err = run(["import", still, "-o", target, "--mesh", "/Cache/Geo/Face"], capsys)
+    _assert_clean_failure(code, err, 1, "still.usda", "no time samples")
+
+    varying = write_mesh_cache(tmp_path / "varying.usda", np.stack([points, points]), counts, indices)
+    stage = _Usd.Stage.Open(str(varying))
+    topo = stage.GetPrimAtPath("/Cache/Geo/Face").GetAttribute("faceVertexIndices")
+    topo.Set(indices, 1001)
+    topo.Set(indices[::-1].copy(), 1002)
+    stage.Save()
+    code, _, err = run(["import", varying, "-o", target], capsys)
+    _assert_clean_failure(code, err, 1, "varying.usda", "faceVertexIndices changes at time 1002")
+
+    bad = np.stack([points, points])
+    bad[1, 2, 1] = np.nan
+    nan_cache = write_mesh_cache(tmp_path / "nan.usda", bad, counts, indices)
+    code, _, err = run(["import", nan_cache, "-o", target], capsys)
+    _assert_clean_failure(code, err, 1, "nan.usda", "NaN or infinite values at time 1002")
+
+    code, _, err = run(["import", cache, "-o", cache], capsys)
+    _assert_clean_failure(code, err, 2, "overwrite an input")
+
+    code, _, err = run(["import", cache, "-o", tmp_path / "nowhere" / "c.usdc"], capsys)
+    _assert_clean_failure(code, err, 1, "does not exist")
+
+    assert list(out.iterdir()) == []
+
+
+def test_permission_denied_folder(tmp_path, grid_cache, capsys):
+    cache, _ = grid_cache
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        if os.access(locked, os.W_OK):
+            pytest.skip("running as root, who may write into read-only folders (see the /proc case)")
+        code, _, err = run(["import", cache, "-o", locked / "c.usdc"], capsys)
+        _assert_clean_failure(code, err, 1, "not writable")
+    finally:
+        locked.chmod(0o700)
+
+
+def test_unwritable_folder_even_for_root(tmp_path, grid_cache, capsys):
+    """Root users bypass permissions; a read-only *file system* location still fails cleanly."""
+    cache, _ = grid_cache
+    code, _, err = run(["import", cache, "-o", Path("/proc/capture.usdc"), "-q"], capsys)
+    _assert_clean_failure(code, err, 1, "/proc")
+
+
+def test_usage_errors_exit_2(capsys):
+    code, _, err = run(["nosuch-command"], capsys)
+    _assert_clean_failure(code, err, 2, "usage error", "invalid choice")
+    code, _, err = run(["import"], capsys)
+    _assert_clean_failure(code, err, 2, "usage error", "required")
+
+
+def test_version_list_env(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and "usdfacedyn" in capsys.readouterr().out
+    code, out, _ = run(["list"], capsys)
+    assert code == 0 and out.startswith("import")
+    code, out, _ = run(["env"], capsys)
+    assert code == 0 and out.startswith("export PXR_PLUGINPATH_NAME=")
+
+
+def test_third_party_processor_is_discovered_through_entry_points(tmp_path):
+    site = tmp_path / "site"
+    (site / "studio_tools").mkdir(parents=True)
+    (site / "studio_tools" / "__init__.py").write_text("")
+    (site / "studio_tools" / "smooth.py").write_text(
+        "from facedyn.processors.base import Processor\n"
+        "class SmoothProcessor(Processor):\n"
+        "    name = 'studio-smooth'\n"
+        "    summary = 'a studio-specific smoothing pass'\n"
+        "    def check(self, request):\n        return {}\n"
+        "    def run(self, request, progress):\n        raise NotImplementedError\n"
+    )
+    dist = site / "studio_tools-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: studio-tools\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text("[facedyn.processors]\nstudio-smooth = studio_tools.smooth:SmoothProcessor\n")
+    env = dict(os.environ, PYTHONPATH=str(site))
+    result = subprocess.run([sys.executable, "-m", "facedyn.cli", "list"], capture_output=True, text=True, env=env)
+    assert result.returncode == 0, result.stderr
+    assert "studio-smooth  a studio-specific smoothing pass" in result.stdout
+    assert "import" in result.stdout
+    result = subprocess.run([sys.executable, "-m", "facedyn.cli", "studio-smooth", "--help"], capture_output=True, text=True, env=env)
+    assert result.returncode == 0 and "--attach" in result.stdout and "--dry-run" in result.stdout
