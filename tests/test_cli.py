@@ -12,7 +12,7 @@ from pxr import Usd
 from facedyn.cli import main
 from facedyn.usd.take import read_take
 
-from conftest import grid_mesh, write_mesh_cache
+from usd_fixtures import grid_mesh, write_mesh_cache
 
 
 def run(argv, capsys):

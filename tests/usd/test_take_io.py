@@ -14,7 +14,7 @@ from facedyn.usd.layers import LayerContent, attach, write_layer, write_take_roo
 from facedyn.usd.take import read_take
 from facedyn.usd.timing import Timing
 
-from conftest import grid_mesh
+from usd_fixtures import grid_mesh
 
 FRAMES = np.arange(1001, 1009, dtype=np.float64)
 
