@@ -89,6 +89,19 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(handler=_cmd_validate)
 
+    p = commands.add_parser("synth", help="simulate a corpus of takes with known truth (the papers' capture protocol)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="corpus folder to write")
+    p.add_argument("--scale", choices=("demo", "standard"), default="demo", help="protocol size (default: demo)")
+    p.add_argument("--rig", type=Path, help="a UsdSkel blend-shape rig (default: the built-in face)")
+    p.add_argument("--actor-seed", type=int, help="make another actor from the rig's identity modes")
+    p.add_argument("--data", type=Path, help="../shared/data-like folder with Live Link curves and CMU mocap for dialog takes")
+    p.add_argument("--noise", type=float, default=0.0, metavar="CM", help="Gaussian tracking noise on the captured points")
+    p.add_argument("--seed", type=int, default=0, help="seed of the protocol's random choices")
+    p.add_argument("--only", metavar="PATTERN", help="only takes whose name matches this glob pattern")
+    p.add_argument("--json", action="store_true", help="print the corpus index as JSON")
+    p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
+    p.set_defaults(handler=_cmd_synth)
+
     requested = next((a for a in argv if not a.startswith("-")), None)
     for name, entry_point in registry.available().items():
         if name == requested:
@@ -212,6 +225,43 @@ def _cmd_validate(args) -> int:
             print(f"{finding.severity.upper()} {finding.validator}: {finding.message}")
         print(f"{args.take}: {len(errors)} error(s), {len(findings) - len(errors)} warning(s)")
     return EXIT_FAILURE if errors else EXIT_OK
+
+
+def _cmd_synth(args) -> int:
+    import fnmatch
+
+    from facedyn.errors import UsageError
+    from facedyn.progress import Progress
+    from facedyn.sim.corpus import protocol
+    from facedyn.usd.corpus import build_corpus
+
+    rig = _load_rig(args.rig, args.actor_seed)
+    specs = protocol(rig, args.scale, args.data, seed=args.seed, noise_cm=args.noise)
+    if args.only:
+        specs = [s for s in specs if fnmatch.fnmatch(s.name, args.only)]
+        if not specs:
+            raise UsageError(f"no take of the {args.scale} protocol matches {args.only!r}")
+    description = {"scale": args.scale, "rig": str(args.rig or "built-in"), "actor_seed": args.actor_seed, "noise_cm": args.noise, "seed": args.seed}
+    index = build_corpus(args.output, rig, specs, progress=Progress.silent() if args.json else Progress(), description=description)
+    if args.json:
+        print(json.dumps(index, indent=2))
+    else:
+        print(f"synth: wrote {len(index['takes'])} takes ({index['frames']} frames of {index['points']} points) to {args.output}")
+        print(f"  simulated {index['simulated_frames_per_second']} frames/s; {index['seconds']['total']} s in all")
+    return EXIT_OK
+
+
+def _load_rig(path: Path | None, actor_seed: int | None):
+    """The built-in face or a USD blend-shape rig, optionally turned into another actor."""
+    if path is None:
+        from facedyn.sim.default_face import default_face
+
+        rig = default_face()
+    else:
+        from facedyn.usd.rig import read_blendshape_rig
+
+        rig = read_blendshape_rig(path)
+    return rig if actor_seed is None else rig.make_actor(seed=actor_seed)
 
 
 def _version_text() -> str:

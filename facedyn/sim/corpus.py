@@ -1,0 +1,199 @@
+"""Simulated takes with known truth, and the papers' capture protocol as a list of them.
+
+A take is a rig driven by expression weights (held, neutral, or real Live Link curves)
+while the skull follows a motion (still, walk, run, hop, a vibrating platform, or real
+mocap); the soft-tissue simulator adds the secondary dynamics. Every take keeps its truth:
+the skull transforms, the quasistatic skin y(t) and the offsets u(t).
+
+Protocol (papers/000): per actor, neutral + 10 held expressions, each under stillness,
+walking, running, hopping and a platform at 6..11 Hz, about 3 s at 120 fps; plus dialog
+takes (Live Link curves) under real walking and hopping head motion (CMU).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from facedyn.geometry import quaternion
+from facedyn.sim import motion
+from facedyn.sim.rig import FaceRig
+from facedyn.sim.tissue import TissueParams, simulate
+
+PLATFORM_HZ = (6, 7, 8, 9, 10, 11)
+PLATFORM_AMPLITUDE_CM = 0.3
+MOTIONS = ("still", "walk", "run", "hop") + tuple(f"platform:{hz}" for hz in PLATFORM_HZ)
+
+# Held expressions as shape-weight recipes, tried in order; a rig gets the first ten whose
+# shapes it has (ICT-FaceKit and the built-in face both use ARKit-style names).
+HELD_EXPRESSIONS: dict[str, dict[str, float]] = {
+    "jaw_open": {"jawOpen": 0.8},
+    "smile": {"mouthSmile_L": 0.9, "mouthSmile_R": 0.9},
+    "pucker": {"mouthPucker": 0.9},
+    "brow_raise": {"browInnerUp_L": 0.8, "browInnerUp_R": 0.8, "browOuterUp_L": 0.6, "browOuterUp_R": 0.6},
+    "cheek_puff": {"cheekPuff_L": 0.9, "cheekPuff_R": 0.9},
+    "blink": {"eyeBlink_L": 1.0, "eyeBlink_R": 1.0},
+    "funnel": {"mouthFunnel": 0.9, "jawOpen": 0.3},
+    "frown": {"mouthFrown_L": 0.9, "mouthFrown_R": 0.9, "browDown_L": 0.6, "browDown_R": 0.6},
+    "smile_left": {"mouthSmile_L": 1.0, "eyeSquint_L": 0.5},
+    "smile_right": {"mouthSmile_R": 1.0, "eyeSquint_R": 0.5},
+    "jaw_wide": {"jawOpen": 0.5, "mouthStretch_L": 0.7, "mouthStretch_R": 0.7},
+    "sneer": {"noseSneer_L": 0.8, "noseSneer_R": 0.8, "mouthUpperUp_L": 0.5, "mouthUpperUp_R": 0.5},
+    "half_open": {"jawOpen": 0.4},
+    "wink_left": {"eyeBlink_L": 1.0},
+}
+
+
+@dataclass(frozen=True)
+class TakeSpec:
+    """What to simulate: an expression source under a skull motion."""
+
+    name: str
+    motion: str  # still | walk | run | hop | platform:HZ | bvh:PATH[#JOINT]
+    expression: str | None = None  # a HELD_EXPRESSIONS key, None = neutral
+    dialog: str | None = None  # a Live Link Face CSV driving the expression instead
+    duration_s: float = 3.0
+    fps: float = 120.0
+    seed: int = 0
+    noise_cm: float = 0.0
+    platform_amplitude_cm: float = PLATFORM_AMPLITUDE_CM
+
+
+@dataclass
+class SimulatedTake:
+    """A take and its truth, all arrays; skull space is the rig's space."""
+
+    spec: TakeSpec
+    frames: np.ndarray  # (F,) time codes, 1-based
+    fps: float
+    skull_translate: np.ndarray  # (F, 3) true skull transform
+    skull_orient: np.ndarray  # (F, 4) w, x, y, z
+    captured: np.ndarray  # (F, N, 3) skull space: quasistatic + offsets (+ tracking noise)
+    quasistatic: np.ndarray  # (F, N, 3) true y(t), skull space
+    offsets: np.ndarray  # (F, N, 3) true u(t), skull space
+    weights: np.ndarray  # (F, K) the expression weights that drove the rig
+    info: dict = field(default_factory=dict)
+
+    def world_points(self) -> np.ndarray:
+        rot = quaternion.to_matrix(self.skull_orient)
+        return (np.einsum("fij,fnj->fni", rot, self.captured.astype(np.float64)) + self.skull_translate[:, None]).astype(np.float32)
+
+
+def skull_motion(spec: TakeSpec) -> motion.SkullTrajectory:
+    """The spec's skull trajectory, `duration_s` long at `fps`."""
+    kind, _, arg = spec.motion.partition(":")
+    common = dict(duration_s=spec.duration_s, fps=spec.fps, seed=spec.seed)
+    if kind == "still":
+        return motion.still(**common)
+    if kind in ("walk", "run", "hop"):
+        return getattr(motion, kind)(**common)
+    if kind == "platform":
+        try:
+            hz = float(arg.lower().removesuffix("hz"))
+        except ValueError:
+            raise ValueError(f"take {spec.name}: platform motion needs a frequency, e.g. platform:9, got {spec.motion!r}") from None
+        return motion.platform(hz, spec.platform_amplitude_cm, **common)
+    if kind == "bvh":
+        path, _, joint = arg.partition("#")
+        return motion.from_bvh(path, joint or "Head", duration_s=spec.duration_s, fps=spec.fps, seed=spec.seed)
+    raise ValueError(f"take {spec.name}: unknown motion {spec.motion!r}; use still, walk, run, hop, platform:HZ or bvh:PATH")
+
+
+def expression_weights(rig: FaceRig, spec: TakeSpec, frame_count: int) -> np.ndarray:
+    """(F, K) weights: neutral, a held expression eased in over 0.3 s, or dialog curves."""
+    weights = np.zeros((frame_count, rig.expression_count), np.float32)
+    if spec.dialog is not None:
+        from facedyn.io.livelink import read_livelink_csv
+        from facedyn.io.resample import resample_curves
+
+        curves = resample_curves(read_livelink_csv(spec.dialog, rig.expression_names), spec.fps)
+        available = len(curves.weights)
+        start = int(np.random.default_rng(spec.seed).integers(0, max(available - frame_count, 0) + 1))
+        rows = np.minimum(np.arange(start, start + frame_count), available - 1)  # hold the last pose if short
+        columns = [rig.shape_index(name) for name in curves.names]
+        weights[:, columns] = curves.weights[rows]
+        return weights
+    if spec.expression is not None:
+        recipe = HELD_EXPRESSIONS[spec.expression]
+        ease = np.clip(np.arange(frame_count) / (0.3 * spec.fps), 0.0, 1.0)
+        ease = ease * ease * (3 - 2 * ease)
+        for shape, value in recipe.items():
+            if shape in rig.expression_names:
+                weights[:, rig.shape_index(shape)] = value * ease
+    return weights
+
+
+def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | None = None) -> SimulatedTake:
+    trajectory = skull_motion(spec)
+    frame_count = trajectory.frame_count
+    weights = expression_weights(rig, spec, frame_count)
+    quasistatic = rig.evaluate(weights) if rig.expression_count else np.repeat(rig.neutral[None], frame_count, 0)
+    result = simulate(
+        quasistatic, rig.topology.triangles(), trajectory.translate, trajectory.orient, spec.fps, tissue,
+        noise_cm=spec.noise_cm, seed=spec.seed, rigid_weights=rig.rigid_weights, neutral=rig.neutral,
+    )
+    return SimulatedTake(
+        spec=spec,
+        frames=np.arange(1, frame_count + 1, dtype=np.float64),
+        fps=spec.fps,
+        skull_translate=trajectory.translate,
+        skull_orient=trajectory.orient,
+        captured=result.points.astype(np.float32),
+        quasistatic=quasistatic.astype(np.float32),
+        offsets=result.offsets.astype(np.float32),
+        weights=weights,
+        info={"motion": spec.motion, "expression": spec.expression, "dialog": spec.dialog and Path(spec.dialog).name},
+    )
+
+
+def held_expressions(rig: FaceRig, count: int = 10) -> list[str]:
+    """The first `count` HELD_EXPRESSIONS whose shapes the rig has (all of them)."""
+    names = set(rig.expression_names)
+    usable = [key for key, recipe in HELD_EXPRESSIONS.items() if set(recipe) <= names]
+    return usable[:count]
+
+
+def protocol(
+    rig: FaceRig,
+    scale: str = "standard",
+    data_dir: Path | None = None,
+    seed: int = 0,
+    noise_cm: float = 0.0,
+) -> list[TakeSpec]:
+    """The capture protocol at a scale: 'standard' (the paper's) or 'demo' (a quick subset).
+
+    Dialog takes need the Live Link curves and CMU mocap in `data_dir` (../shared/data);
+    without it they use procedural walking and hopping and stay out when no curves exist.
+    """
+    if scale == "standard":
+        expressions, motions, duration, dialog_s = held_expressions(rig, 10), MOTIONS, 3.0, 6.0
+    elif scale == "demo":
+        expressions, motions, duration, dialog_s = held_expressions(rig, 3), ("still", "walk", "hop", "platform:7", "platform:9", "platform:11"), 2.0, 3.0
+    else:
+        raise ValueError(f"scale must be 'demo' or 'standard', got {scale!r}")
+    specs = []
+    take_seed = seed
+    for expression in [None] + expressions:
+        for kind in motions:
+            take_seed += 1
+            label = expression or "neutral"
+            name = f"{label}_{kind.replace(':', '')}" + ("hz" if kind.startswith("platform") else "")
+            specs.append(TakeSpec(name, kind, expression, duration_s=duration, seed=take_seed, noise_cm=noise_cm))
+            if expression is None and scale == "standard":
+                break  # the neutral is captured once, standing still
+    specs += dialog_takes(data_dir, dialog_s, seed + 1000, noise_cm)
+    return specs
+
+
+def dialog_takes(data_dir: Path | None, duration_s: float, seed: int, noise_cm: float) -> list[TakeSpec]:
+    """Speech under real walking and hopping head motion, when the shared data is there."""
+    if data_dir is None or not (data_dir / "livelink-face").is_dir():
+        return []
+    csv = data_dir / "livelink-face" / "MySlate_3_Jason_Millers_iPhone.csv"
+    mocap = data_dir / "cmu-mocap"
+    motions = {"walk": f"bvh:{mocap / '131_01.bvh'}", "hop": f"bvh:{mocap / '131_03.bvh'}"}
+    return [
+        TakeSpec(f"dialog_{name}", source, dialog=str(csv), duration_s=duration_s, seed=seed + i, noise_cm=noise_cm)
+        for i, (name, source) in enumerate(motions.items())
+    ]
