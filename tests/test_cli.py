@@ -211,3 +211,28 @@ def test_third_party_processor_is_discovered_through_entry_points(tmp_path):
     assert "import" in result.stdout
     result = subprocess.run([sys.executable, "-m", "facedyn.cli", "studio-smooth", "--help"], capture_output=True, text=True, env=env)
     assert result.returncode == 0 and "--attach" in result.stdout and "--dry-run" in result.stdout
+
+
+def test_import_obj_sequence(tmp_path, capsys):
+    from facedyn.io.obj import ObjMesh, write_obj
+
+    points, counts, indices = grid_mesh(4)
+    uv_values = points[:, :2] / 3.0
+    folder = tmp_path / "objs"
+    folder.mkdir()
+    for frame in (1001, 1002, 1010):
+        mesh = ObjMesh(points + 0.01 * frame, counts, indices, uv_values, indices.copy())
+        write_obj(folder / f"face.{frame}.obj", mesh)
+    code, _, err = run(["import", folder, "-o", tmp_path / "capture.usdc", "-q"], capsys)
+    _assert_clean_failure(code, err, 2, "--fps")
+    code, _, err = run(["import", *sorted(folder.glob("*.obj")), "-o", tmp_path / "capture.usdc", "--fps", "30", "--units", "0.1", "-q"], capsys)
+    assert code == 0, err
+    perf, _ = read_take(tmp_path / "take.usda")
+    np.testing.assert_array_equal(perf.frames, [1001, 1002, 1010])
+    np.testing.assert_allclose(perf.points[2], (points + 10.10) * 0.1, atol=1e-5)
+    assert perf.fps == 30.0 and perf.uvs.indices is not None
+    # A frame whose topology differs is named in the error.
+    write_obj(folder / "face.1011.obj", ObjMesh(points, counts[:-1], indices[:-4]))
+    code, _, err = run(["import", folder, "-o", tmp_path / "capture2.usdc", "--fps", "30", "-q"], capsys)
+    _assert_clean_failure(code, err, 1, "face.1011.obj")
+    assert not (tmp_path / "capture2.usdc").exists()

@@ -3,8 +3,10 @@ from __future__ import annotations
 
 from os import PathLike
 
+from facedyn.errors import FacedynError
 
-class InputError(ValueError):
+
+class InputError(FacedynError):
     """A file is missing or malformed; the one-line message names the file (and line)."""
 
     def __init__(self, path: str | PathLike, message: str, line: int | None = None) -> None:

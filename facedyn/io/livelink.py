@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from os import PathLike
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -107,7 +107,7 @@ def read_livelink_csv(path: str | PathLike, shape_names: Sequence[str], timecode
     """
     path = str(path)
     try:
-        with open(path, newline="") as handle:
+        with open(path, newline="", encoding="utf-8-sig") as handle:
             rows = [(line, row) for line, row in enumerate(csv.reader(handle), 1) if row]
     except FileNotFoundError:
         raise InputError(path, "no such file") from None
@@ -122,7 +122,8 @@ def read_livelink_csv(path: str | PathLike, shape_names: Sequence[str], timecode
     if not mapping:
         shown = ", ".join(header[:6]) + (", ..." if len(header) > 6 else "")
         raise InputError(path, f"no column maps to any of the rig's {len(shape_names)} shapes (columns: {shown})")
-    good = [(line, row) for line, row in rows[1:] if len(row) == len(header)]
+    kept = [index for index in range(1, len(rows)) if len(rows[index][1]) == len(header)]
+    good = [rows[index] for index in kept]
     if len(good) < 2:
         raise InputError(path, f"{len(good)} complete data rows, at least 2 are needed")
 
@@ -147,9 +148,9 @@ def read_livelink_csv(path: str | PathLike, shape_names: Sequence[str], timecode
     weights = np.array([_numbers(path, line, [row[c] for c in columns]) for line, row in good], dtype=np.float32)
     return ExpressionCurves(
         times=seconds - seconds[0],
-        weights=weights.reshape(len(good), len(names)),
+        weights=weights,
         names=names,
-        fps=_capture_rate(seconds),
+        fps=_capture_rate(seconds, np.array(kept)),
         unmapped=unmapped,
         skipped_rows=len(rows) - 1 - len(good),
         start_s=float(seconds[0]),
@@ -176,9 +177,13 @@ def _seconds(fields: np.ndarray, fps: float | None) -> tuple[np.ndarray, float]:
     return seconds + 86400.0 * np.cumsum(np.diff(seconds, prepend=seconds[:1]) < -43200.0), rate
 
 
-def _capture_rate(seconds: np.ndarray) -> float:
-    """Rows per second from the median step, snapped to a standard rate within 1 %."""
-    measured = 1.0 / float(np.median(np.diff(seconds)))
+def _capture_rate(seconds: np.ndarray, rows: np.ndarray) -> float:
+    """Rows per second, snapped to a standard rate within 1 %.
+
+    `rows` are the kept rows' positions in the file: a step over skipped rows counts as
+    that many steps, so lost tracking does not lower the rate.
+    """
+    measured = 1.0 / float(np.median(np.diff(seconds) / np.diff(rows)))
     nearest = min(STANDARD_RATES, key=lambda rate: abs(rate - measured))
     return float(nearest) if abs(nearest - measured) <= 0.01 * nearest else measured
 

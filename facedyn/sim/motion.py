@@ -6,7 +6,7 @@ they are what make a face jiggle. Every source returns a `SkullTrajectory`
 like the face rig), sampled at ``fps`` from time 0, ``round(duration_s * fps)`` frames.
 
 The gaits start at the origin and advance along +Z. Their magnitudes follow gait studies of
-the head: walking at ~2 steps/s bobs 4-5 cm with vertical acceleration peaks of ~0.4 g;
+the head: walking at ~2 steps/s bobs ~4 cm with vertical acceleration peaks of ~0.4 g;
 running at ~2.8 steps/s has a flight phase (free fall, -1 g) and ~1 g stance peaks;
 hopping at ~2 hops/s has ~1.3 g landing peaks. Each take draws its amplitudes, phases and a
 slow tempo drift from ``seed``, so takes differ but repeat exactly.
@@ -111,14 +111,14 @@ class _Gait:
     roll_deg: float  # at the stride rate
 
 
-_WALK = _Gait(step_hz=2.0, speed_cm_s=130.0, flight=0.0, bob_cm=2.1, surge_cm=0.8, sway_cm=2.0, pitch_deg=2.0, yaw_deg=2.0, roll_deg=1.5)
+_WALK = _Gait(step_hz=2.0, speed_cm_s=130.0, flight=0.0, bob_cm=2.0, surge_cm=0.8, sway_cm=2.0, pitch_deg=2.0, yaw_deg=2.0, roll_deg=1.5)
 _RUN = _Gait(step_hz=2.8, speed_cm_s=300.0, flight=0.4, bob_cm=0.0, surge_cm=1.0, sway_cm=1.5, pitch_deg=3.0, yaw_deg=3.0, roll_deg=2.0)
 _HOP = _Gait(step_hz=2.0, speed_cm_s=40.0, flight=0.46, bob_cm=0.0, surge_cm=1.0, sway_cm=0.5, pitch_deg=4.0, yaw_deg=1.0, roll_deg=1.0)
 
 
 def walk(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, step_hz: float = 2.0,
          speed_cm_s: float = 130.0, ramp: Ramp = Ramp()) -> SkullTrajectory:
-    """Walking: ~2 steps/s, 4-5 cm bob, vertical acceleration peaks ~0.4 g."""
+    """Walking: ~2 steps/s, ~4 cm bob, vertical acceleration peaks ~0.4 g."""
     return _gait(replace(_WALK, step_hz=step_hz, speed_cm_s=speed_cm_s), duration_s, fps, seed, ramp)
 
 
@@ -295,9 +295,9 @@ def _gait(gait: _Gait, duration_s: float, fps: float, seed: int, ramp: Ramp) -> 
     times = _times(duration_s, fps)
     rng = np.random.default_rng(seed)
     envelope = ramp.envelope(times, duration_s)
-    tempo = gait.step_hz * (1.0 + 0.03 * _drift(rng, times))
+    tempo = gait.step_hz * (1.0 + 0.02 * _drift(rng, times))
     phase = rng.uniform(0.0, 2 * np.pi) + 2 * np.pi * _integral(tempo, fps)
-    scale = rng.uniform(0.85, 1.15, 6)
+    scale = rng.uniform(0.9, 1.1, 6)
     shift = rng.uniform(0.0, 2 * np.pi, 6)
 
     if gait.flight > 0:
