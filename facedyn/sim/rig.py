@@ -35,7 +35,7 @@ _DENSE_BASIS_FILL = 0.2
 class ShapeOffsets(NamedTuple):
     """One sparse blend shape: the vertices it moves and by how much (cm)."""
 
-    indices: np.ndarray  # (n,) int32, increasing
+    indices: np.ndarray  # (n,) int32, each vertex once
     offsets: np.ndarray  # (n, 3) float32
 
 
@@ -122,13 +122,15 @@ class FaceRig:
             raise ValueError(f"rig {self.name!r}: {len(self.expression_names)} expression names for {len(shapes)} offset sets")
         checked = []
         for name, (indices, offsets) in zip(self.expression_names, shapes):
-            indices = np.asarray(indices, dtype=np.int32)
+            indices = np.asarray(indices, dtype=np.int64)
             offsets = np.asarray(offsets, dtype=np.float32)
             if indices.ndim != 1 or offsets.shape != (len(indices), 3):
                 raise ValueError(f"rig {self.name!r}: shape {name!r} has {len(indices)} indices but offsets of shape {offsets.shape}")
             if indices.size and (indices.min() < 0 or indices.max() >= n):
                 raise ValueError(f"rig {self.name!r}: shape {name!r} moves vertices outside [0, {n})")
-            checked.append(ShapeOffsets(indices, offsets))
+            if len(np.unique(indices)) != len(indices):
+                raise ValueError(f"rig {self.name!r}: shape {name!r} lists a vertex more than once")
+            checked.append(ShapeOffsets(indices.astype(np.int32), offsets))
         return tuple(checked)
 
     def _checked_vertices(self, what: str, vertices, n: int) -> np.ndarray:
@@ -203,8 +205,8 @@ class FaceRig:
                 f"rig {self.name!r}: weights must be (K,) or (F, K) with K = {self.expression_count} expressions, got shape {w.shape}"
             )
         frames = np.atleast_2d(w)
-        delta = np.asarray(frames @ self._basis).reshape(len(frames), self.point_count, 3)
-        posed = delta + self.neutral
+        posed = np.asarray(frames @ self._basis).reshape(len(frames), self.point_count, 3)
+        posed += self.neutral
         return posed[0] if w.ndim == 1 else posed
 
     def make_actor(

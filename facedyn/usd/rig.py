@@ -70,20 +70,24 @@ def read_blendshape_rig(path: str | os.PathLike, mesh: str | None = None) -> Fac
     for mode, (_, indices, offsets) in zip(modes, identity):
         mode[indices] = offsets @ to_cm.T
     rigid = _int_array(prim, RIGID_VERTICES_ATTR, ICT_RIGID_VERTICES_ATTR)
-    return FaceRig(
-        name=_rig_name(prim),
-        neutral=points @ to_cm.T,
-        topology=topology,
-        uvs=read_uvs(geom),
-        expression_names=tuple(name for name, _, _ in expressions),
-        expression_offsets=tuple((indices, offsets) for _, indices, offsets in expressions),
-        identity_modes=modes,
-        face_vertices=_int_array(prim, FACE_VERTICES_ATTR, ICT_FACE_VERTICES_ATTR),
-        rigid_vertices=rigid if rigid is not None else _still_vertices(expressions, len(points)),
-        rigid_weights=_array(prim, RIGID_WEIGHTS_ATTR, np.float32),
-        landmarks=_landmarks(prim, where),
-        metadata={"source": str(path), "mesh": str(prim.GetPath())},
-    )
+    landmarks = _landmarks(prim, where)
+    try:
+        return FaceRig(
+            name=_rig_name(prim),
+            neutral=points @ to_cm.T,
+            topology=topology,
+            uvs=read_uvs(geom),
+            expression_names=tuple(name for name, _, _ in expressions),
+            expression_offsets=tuple((indices, offsets) for _, indices, offsets in expressions),
+            identity_modes=modes,
+            face_vertices=_int_array(prim, FACE_VERTICES_ATTR, ICT_FACE_VERTICES_ATTR),
+            rigid_vertices=rigid if rigid is not None else _still_vertices(expressions, len(points)),
+            rigid_weights=_array(prim, RIGID_WEIGHTS_ATTR, np.float32),
+            landmarks=landmarks,
+            metadata={"source": str(path), "mesh": str(prim.GetPath())},
+        )
+    except ValueError as exc:  # vertex sets or weights in the file that do not fit the mesh
+        raise TakeError(f"{where}: {exc}") from None
 
 
 def _find_rig_mesh(stage: Usd.Stage) -> Usd.Prim:
@@ -228,7 +232,7 @@ def write_blendshape_rig(rig: FaceRig, path: str | os.PathLike, sparse: bool = T
 def _author_mesh(mesh: UsdGeom.Mesh, rig: FaceRig) -> None:
     """Neutral geometry, topology, uvs and the vertex sets, every value authored explicitly."""
     types = Sdf.ValueTypeNames
-    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rig.neutral))
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(rig.neutral)))
     mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([rig.neutral.min(axis=0), rig.neutral.max(axis=0)])))
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(rig.topology.face_vertex_counts, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(rig.topology.face_vertex_indices, np.int32)))
@@ -242,7 +246,7 @@ def _author_mesh(mesh: UsdGeom.Mesh, rig: FaceRig) -> None:
             primvar.SetIndices(Vt.IntArray.FromNumpy(np.ascontiguousarray(rig.uvs.indices, np.int32)))
     prim = mesh.GetPrim()
     for name, values in ((FACE_VERTICES_ATTR, rig.face_vertices), (RIGID_VERTICES_ATTR, rig.rigid_vertices)):
-        prim.CreateAttribute(name, types.IntArray).Set(Vt.IntArray.FromNumpy(values))
-    prim.CreateAttribute(RIGID_WEIGHTS_ATTR, types.FloatArray).Set(Vt.FloatArray.FromNumpy(rig.rigid_weights))
+        prim.CreateAttribute(name, types.IntArray).Set(Vt.IntArray.FromNumpy(np.ascontiguousarray(values)))
+    prim.CreateAttribute(RIGID_WEIGHTS_ATTR, types.FloatArray).Set(Vt.FloatArray.FromNumpy(np.ascontiguousarray(rig.rigid_weights)))
     prim.CreateAttribute(LANDMARK_NAMES_ATTR, types.TokenArray).Set(Vt.TokenArray(list(rig.landmarks)))
     prim.CreateAttribute(LANDMARK_VERTICES_ATTR, types.IntArray).Set(Vt.IntArray.FromNumpy(np.array(list(rig.landmarks.values()), np.int32)))
