@@ -11,6 +11,7 @@ import numpy as np
 
 from facedyn.preview import text
 
+BACKGROUND = (0.12, 0.12, 0.12)  # behind renders, legends and contact sheets alike
 ZERO = np.array([0.62, 0.62, 0.62])
 POSITIVE = np.array([0.10, 0.78, 0.22])
 NEGATIVE = np.array([0.88, 0.14, 0.10])
@@ -48,7 +49,7 @@ def legend(
     height: int = 256,
     ticks: int = 5,
     font_size: int = 14,
-    background: tuple[float, float, float] = (0.12, 0.12, 0.12),
+    background: tuple[float, float, float] = BACKGROUND,
 ) -> np.ndarray:
     """A vertical colour bar with tick labels in mm: (height, width, 3) uint8, +r at the top."""
     if not range_mm > 0:
@@ -57,7 +58,7 @@ def legend(
         raise ValueError(f"legend needs at least 2 ticks and height >= {4 * font_size}, got {ticks}, {height}")
     values = np.linspace(range_mm, -range_mm, ticks)
     values[np.abs(values) < 1e-9 * range_mm] = 0.0
-    labels = [f"{v:+.2g} mm" if v else "0 mm" for v in values]
+    labels = [f"{v:+.3g} mm" if v else "0 mm" for v in values]
     pad, bar_w = font_size // 2 + 2, max(font_size, 12)
     label_w = max(text.text_size(s, font_size)[0] for s in labels)
     width = pad + bar_w + pad + label_w + pad

@@ -15,6 +15,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from facedyn.preview import text
+from facedyn.preview.colormap import BACKGROUND
 
 _FORMATS = {
     np.dtype(np.uint8): oiio.UINT8,
@@ -60,6 +61,8 @@ def write_image(
             raise ValueError(f"{len(channel_names)} channel names for {channels} channels")
         spec.channelnames = tuple(channel_names)
     for name, value in (attributes or {}).items():
+        if isinstance(value, np.generic):
+            value = value.item()
         if not isinstance(value, (int, float, str)) or isinstance(value, bool):
             raise ValueError(f"attribute {name!r} must be an int, float or str, got {type(value).__name__}")
         spec.attribute(name, value)
@@ -67,6 +70,7 @@ def write_image(
     tmp = folder / f".{path.name}.{uuid.uuid4().hex[:12]}.tmp{path.suffix}"
     out = oiio.ImageOutput.create(str(tmp))
     if out is None:
+        oiio.geterror()  # taken so that it is not reported again at exit; the message below says it
         raise ValueError(f"cannot write {path}: OpenImageIO has no writer for {path.suffix!r} files")
     try:
         written = out.open(str(tmp), spec) and out.write_image(np.ascontiguousarray(arr))
@@ -105,7 +109,7 @@ def contact_sheet(
     legend: np.ndarray | None = None,
     font_size: int = 16,
     gap: int = 8,
-    background: tuple[float, float, float] = (0.12, 0.12, 0.12),
+    background: tuple[float, float, float] = BACKGROUND,
 ) -> np.ndarray:
     """One uint8 (H, W, 3) image comparing sequences frame by frame.
 

@@ -1,10 +1,11 @@
 """A headless triangle rasterizer in NumPy: review frames without OpenGL or a display.
 
-Render farms and CI have no GPU context, so review images are rasterized on arrays. Every
-triangle is expanded into the pixels of its bounding box as one flat (ragged) batch, the
-pixels inside are found with barycentric tests, and the front-most triangle per pixel is
-chosen with ``np.minimum.at`` over packed (depth, triangle) keys. The same
-`rasterize` bakes uv maps (`facedyn.preview.uvmaps`), where the "screen" is a uv tile.
+Render farms and CI have no GPU context, so review images are rasterized on arrays. All
+triangles are expanded at once into the rows of their bounding boxes, each row into the
+span of pixels whose centres lie inside (bounded by the barycentrics), and the
+front-most triangle per pixel is chosen with ``np.minimum.at`` over packed (depth,
+triangle) keys. The same `rasterize` bakes uv maps (`facedyn.preview.uvmaps`), where the
+"screen" is a uv tile.
 
 Conventions: pixel (x, y) has its centre at (x + 0.5, y + 0.5), y grows downward; a pixel
 belongs to a triangle when its centre lies inside (edges inclusive, ties go to the
@@ -17,10 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from facedyn.preview.colormap import BACKGROUND
 from facedyn.preview.normals import VertexNormals, face_normals, normalize
 
 # Inside-test tolerance in barycentric units: pixel centres on a shared edge must not fall
-# through the crack between two triangles because of float32 rounding.
+# through the crack between two triangles because of rounding.
 _EPS = 1e-5
 _NEAR = 1e-6
 _NO_KEY = np.iinfo(np.int64).max
@@ -68,7 +70,7 @@ def frame_camera(
     in its own image plane and distance so that the bounding box of the projected points
     is centred and fills the field of view (`fov`, vertical, degrees) shrunk by `margin`.
     """
-    p = np.asarray(points, dtype=np.float64)
+    p = np.asarray(points)
     if p.ndim not in (2, 3) or p.shape[-1] != 3 or p.size == 0:
         raise ValueError(f"points must be a non-empty (N, 3) or (F, N, 3) array, got {p.shape}")
     if width < 1 or height < 1:
@@ -77,28 +79,51 @@ def frame_camera(
         raise ValueError(f"fov must be in (0, 170) degrees and margin positive, got {fov}, {margin}")
     if not -89.0 <= pitch <= 89.0:
         raise ValueError(f"pitch must be within [-89, 89] degrees, got {pitch}")
-    flat = p.reshape(-1, 3)
-    centre = 0.5 * (flat.min(axis=0) + flat.max(axis=0))
+    coords = np.ascontiguousarray(p.reshape(-1, 3).T, dtype=np.float64)  # (3, M): fast reductions
+    if not np.isfinite(coords).all():
+        raise ValueError("points contain NaN or infinite coordinates")
+    centre = 0.5 * (coords.min(axis=1) + coords.max(axis=1))
     yw, pt = np.radians(yaw), np.radians(pitch)
     back = np.array([np.sin(yw) * np.cos(pt), np.sin(pt), np.cos(yw) * np.cos(pt)])
     right = normalize(np.cross([0.0, 1.0, 0.0], back))
     up = np.cross(back, right)
     rotation = np.stack([right, up, back])
     focal = 0.5 * height / np.tan(0.5 * np.radians(fov))
-    local = (flat - centre) @ rotation.T
+    local = rotation @ (coords - centre[:, None])  # (3, M) view-aligned, origin at the centre
     # Eye at centre + s*right + t*up + d*back. Point i fits horizontally when
-    # |x_i - s| <= tan_x * (d - z_i): the smallest such d and its s are closed-form, and
-    # likewise vertically, so the projected bounds end up centred and tight.
-    placement = []
+    # |x_i - s| <= tan_x * (d - z_i); the smallest d for which some s fits all points is
+    # closed-form, likewise vertically. At the larger of the two, each axis is centred.
+    need = []
     for axis, tan in ((0, 0.5 * width / focal / margin), (1, 0.5 * height / focal / margin)):
-        a = np.max(local[:, 2] * tan + local[:, axis])
-        b = np.max(local[:, 2] * tan - local[:, axis])
-        placement.append(((a - b) / 2, (a + b) / (2 * tan)))
-    (s, dx), (t, dy) = placement
-    extent = max(np.ptp(local, axis=0).max(), 1e-9)
-    distance = max(dx, dy, local[:, 2].max() + 1e-3 * extent)
+        a = np.max(local[2] * tan + local[axis])
+        b = np.max(local[2] * tan - local[axis])
+        need.append((a + b) / (2 * tan))
+    extent = max(np.ptp(local, axis=1).max(), 1e-9)
+    distance = max(*need, local[2].max() + 1e-3 * extent)
+    s, t = (_centre(local[axis], local[2], distance) for axis in (0, 1))
     eye = centre + s * right + t * up + distance * back
     return Camera(rotation, eye, float(focal), int(width), int(height))
+
+
+def _centre(x: np.ndarray, z: np.ndarray, distance: float) -> float:
+    """The eye offset s whose projections (x_i - s) / (distance - z_i) span a centred range.
+
+    The span's midpoint decreases monotonically with s, so s is found by bisection. After
+    a few steps on all points, only the points that can still be an extreme within the
+    bracket are kept, which keeps framing a long sequence cheap.
+    """
+    a = 1.0 / (distance - z)
+    ax = a * x
+    lo, hi = float(x.min()), float(x.max())
+    for step in range(64):
+        if step == 8:
+            at_lo, at_hi = ax - lo * a, ax - hi * a
+            keep = (at_lo >= at_hi.max()) | (at_hi <= at_lo.min())
+            a, ax = a[keep], ax[keep]
+        mid = 0.5 * (lo + hi)
+        v = ax - mid * a
+        lo, hi = (mid, hi) if v.max() + v.min() > 0 else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 @dataclass
@@ -158,64 +183,72 @@ def rasterize(
     bw = x1[ids].astype(np.int64) - x0 + 1
     bh = y1[ids].astype(np.int64) - y0 + 1
 
-    # Barycentrics of corners 0 and 1 and 1/z are affine in (x, y): rows hold the value
-    # at the box's first pixel centre and the steps per pixel in x and in y, so that each
-    # pixel needs only small offsets from its box corner (accurate in float32).
+    # Barycentrics of corners 0 and 1 and 1/z are affine in the pixel offsets (dx, dy)
+    # from the box's first pixel centre: columns of `coef` hold each one's value there and
+    # its steps per pixel in x and in y (one row per triangle, so gathers move whole rows).
     cx, cy = x0 + 0.5, y0 + 0.5
-    coef = np.empty((9, len(ids)))
+    coef = np.empty((len(ids), 9))
     for k, (i, j) in enumerate(((1, 2), (2, 0))):
-        coef[3 * k] = ((x[:, i] - cx) * (y[:, j] - cy) - (x[:, j] - cx) * (y[:, i] - cy)) / area2
-        coef[3 * k + 1] = (y[:, i] - y[:, j]) / area2
-        coef[3 * k + 2] = (x[:, j] - x[:, i]) / area2
+        coef[:, 3 * k] = ((x[:, i] - cx) * (y[:, j] - cy) - (x[:, j] - cx) * (y[:, i] - cy)) / area2
+        coef[:, 3 * k + 1] = (y[:, i] - y[:, j]) / area2
+        coef[:, 3 * k + 2] = (x[:, j] - x[:, i]) / area2
     dz0, dz1 = iz[:, 0] - iz[:, 2], iz[:, 1] - iz[:, 2]
-    coef[6] = iz[:, 2] + dz0 * coef[0] + dz1 * coef[3]
-    coef[7] = dz0 * coef[1] + dz1 * coef[4]
-    coef[8] = dz0 * coef[2] + dz1 * coef[5]
-    coef = coef.astype(np.float32)
+    coef[:, 6] = iz[:, 2] + dz0 * coef[:, 0] + dz1 * coef[:, 3]
+    coef[:, 7] = dz0 * coef[:, 1] + dz1 * coef[:, 4]
+    coef[:, 8] = dz0 * coef[:, 2] + dz1 * coef[:, 5]
 
     # Depth test in batches of about _BATCH box pixels, so that memory stays bounded when
     # a few triangles cover a large uv tile. Keys pack the depth (nearer, i.e. larger
     # positive 1/z, i.e. larger float bits, first) above the triangle's index (lower
     # first), so that one minimum per pixel picks the winner deterministically.
     zbuf = np.full(width * height, _NO_KEY, dtype=np.int64)
-    counts = bw * bh
-    ends = np.cumsum(counts)
+    ends = np.cumsum(bw * bh)
     cuts = np.unique(np.searchsorted(ends, np.arange(_BATCH, ends[-1] if len(ends) else 0, _BATCH), side="right"))
     for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(ids)]):
         if hi > lo:
-            pix, inv_depth, tri = _cover(coef[:, lo:hi], x0[lo:hi], y0[lo:hi], bw[lo:hi], counts[lo:hi], width)
+            pix, inv_depth, tri = _spans(coef[lo:hi], x0[lo:hi], y0[lo:hi], bw[lo:hi], bh[lo:hi], width)
             bits = np.maximum(inv_depth, np.float32(1e-30)).view(np.int32).astype(np.int64)
             np.minimum.at(zbuf, pix, (-bits << 32) + (tri + lo))
 
     pixel = np.flatnonzero(zbuf != _NO_KEY)
     tri = zbuf[pixel] & 0xFFFFFFFF
-    dx = (pixel % width - x0[tri]).astype(np.float32)
-    dy = (pixel // width - y0[tri]).astype(np.float32)
-    c = coef[:6, tri]
+    dx, dy = pixel % width - x0[tri], pixel // width - y0[tri]
+    c = np.take(coef, tri, axis=0)
     bary = np.empty((len(pixel), 3), dtype=np.float32)
-    bary[:, 0] = c[0] + c[1] * dx + c[2] * dy
-    bary[:, 1] = c[3] + c[4] * dx + c[5] * dy
+    bary[:, 0] = c[:, 0] + c[:, 1] * dx + c[:, 2] * dy
+    bary[:, 1] = c[:, 3] + c[:, 4] * dx + c[:, 5] * dy
     bary[:, 2] = 1.0 - bary[:, 0] - bary[:, 1]
     return Fragments(pixel, ids[tri], bary, int(width), int(height))
 
 
-def _cover(coef, x0, y0, bw, counts, width):
-    """Pixels whose centres lie inside the given triangles: flat pixel index, 1/z, triangle."""
-    total = int(counts.sum())
-    local = np.arange(total, dtype=np.int64) - np.repeat(np.cumsum(counts) - counts, counts)
-    w_rep = np.repeat(bw, counts)
-    dy = local // w_rep
-    dx = local - dy * w_rep
-    dxf, dyf = dx.astype(np.float32), dy.astype(np.float32)
-    c = np.repeat(coef[:6], counts, axis=1)
-    b0 = c[0] + c[1] * dxf + c[2] * dyf
-    b1 = c[3] + c[4] * dxf + c[5] * dyf
-    inside = np.flatnonzero((b0 >= -_EPS) & (b1 >= -_EPS) & (b0 + b1 <= 1.0 + _EPS))
-    tri = np.repeat(np.arange(len(counts), dtype=np.int64), counts)[inside]
-    dx, dy = dx[inside], dy[inside]
-    pix = (y0[tri] + dy) * width + x0[tri] + dx
-    z = coef[6:9, tri]
-    return pix, z[0] + z[1] * dxf[inside] + z[2] * dyf[inside], tri
+def _spans(coef, x0, y0, bw, bh, width):
+    """Pixels whose centres lie inside the given triangles, found as one x-span per box row.
+
+    Along a row each barycentric is affine in x, so each bounds x from one side and the
+    pixels inside are exactly the span between the bounds: no pixel is tested, and none
+    outside is generated. Returns flat pixel index, 1/z (float32) and triangle (row of
+    `coef`) per pixel.
+    """
+    tri = np.repeat(np.arange(len(bh)), bh)
+    dy = np.arange(len(tri)) - np.repeat(np.cumsum(bh) - bh, bh)
+    c = np.repeat(coef, bh, axis=0)
+    first = np.zeros(len(tri))
+    last = np.repeat(bw - 1, bh).astype(np.float64)
+    empty = np.zeros(len(tri), dtype=bool)
+    b0, b1 = c[:, 0] + c[:, 2] * dy, c[:, 3] + c[:, 5] * dy
+    for start, step in ((b0, c[:, 1]), (b1, c[:, 4]), (1.0 - b0 - b1, -c[:, 1] - c[:, 4])):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bound = (-_EPS - start) / step
+        first = np.where(step > 0, np.maximum(first, np.ceil(bound)), first)
+        last = np.where(step < 0, np.minimum(last, np.floor(bound)), last)
+        empty |= (step == 0) & (start < -_EPS)
+    n = np.where(empty, 0, np.maximum(last - first + 1, 0)).astype(np.int64)
+    first = np.where(n > 0, first, 0.0)
+    local = np.arange(n.sum(), dtype=np.int64) - np.repeat(np.cumsum(n) - n, n)
+    row_start = (np.repeat(y0, bh) + dy) * width + np.repeat(x0, bh) + first.astype(np.int64)
+    z_start = (c[:, 6] + c[:, 7] * first + c[:, 8] * dy).astype(np.float32)
+    inv_depth = np.repeat(z_start, n) + np.repeat(c[:, 7].astype(np.float32), n) * local.astype(np.float32)
+    return np.repeat(row_start, n) + local, inv_depth, np.repeat(tri, n)
 
 
 class Renderer:
@@ -232,7 +265,7 @@ class Renderer:
         point_count: int,
         camera: Camera,
         shading: str = "smooth",
-        background: tuple[float, float, float] = (0.12, 0.12, 0.12),
+        background: tuple[float, float, float] = BACKGROUND,
         ambient: float = 0.25,
     ):
         if shading not in ("smooth", "flat"):
@@ -264,7 +297,7 @@ class Renderer:
         xy, depth = cam.project(p)
         frags = rasterize(xy, depth, self.triangles, cam.width, cam.height)
         if self.shading == "smooth":
-            lit = (base * self._lambert(self.normals(p))[:, None]).astype(np.float32)
+            lit = self.shade(p, base).astype(np.float32)
             rgb = np.einsum("kc,kcj->kj", frags.bary, lit[self.triangles][frags.triangle])
         else:
             fn = normalize(face_normals(p, self.triangles))
@@ -277,6 +310,10 @@ class Renderer:
         image *= 255.0
         image += 0.5
         return image.astype(np.uint8).reshape(cam.height, cam.width, 3)
+
+    def shade(self, points: np.ndarray, colors: np.ndarray) -> np.ndarray:
+        """Lit vertex colours (N, 3) of smooth shading: colour times Lambert of the vertex normal."""
+        return colors * self._lambert(self.normals(points))[:, None]
 
     def _lambert(self, normals: np.ndarray) -> np.ndarray:
         return self.ambient + (1.0 - self.ambient) * np.abs(normals @ self.light)

@@ -3,8 +3,8 @@
 Compositors and DCC shaders apply the dynamics offsets as textures, so each frame's
 skull-space offsets (cm) are baked into uv space: RGB = xyz offset, A = coverage. Which
 triangle and barycentrics each texel takes depends only on the uv layout, so it is
-rasterized once per topology (`UVBaker`); baking a frame is then a gather and a weighted
-sum, done for several frames at once.
+rasterized once per topology (`UVBaker`) into a sparse texel-by-vertex weight matrix;
+baking is then one sparse product for several frames at once.
 
 Tiles follow the UDIM convention: uv tile (u_tile, v_tile) is 1001 + u_tile + 10 * v_tile
 and every triangle belongs to the tile holding its uv centroid. Texel (x, y) of a
@@ -18,23 +18,23 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 
 from facedyn.performance import Topology, UVs
 from facedyn.preview.images import write_image
 from facedyn.preview.raster import rasterize
 
-# Frames are baked together in groups whose gathered values stay near this many floats.
-_CHUNK_FLOATS = 1 << 24
+# Frames are baked together in groups whose maps stay near this many floats (128 MB).
+_CHUNK_FLOATS = 1 << 25
 
 
 @dataclass
 class _Tile:
-    pixel: np.ndarray  # (K,) flat texel index
-    vertices: np.ndarray  # (K, 3) mesh vertices of the covering triangle's corners
-    bary: np.ndarray  # (K, 3) float32
+    weights: sp.csr_matrix  # (res * res, N): each covered texel's barycentric weights
+    coverage: np.ndarray  # (res * res,) float32, 1 where a triangle covers the texel
 
 
-def corner_uv_indices(topology: Topology, uvs: UVs) -> np.ndarray:
+def _corner_uv_indices(topology: Topology, uvs: UVs) -> np.ndarray:
     """Index into `uvs.values` for every face-vertex corner, (sum(counts),)."""
     corners = len(topology.face_vertex_indices)
     if uvs.interpolation == "faceVarying":
@@ -77,7 +77,7 @@ class UVBaker:
         # face-vertex corners, which is where faceVarying uvs live.
         corners = np.arange(len(topology.face_vertex_indices), dtype=np.int32)
         tri_corners = Topology(topology.face_vertex_counts, corners).triangles()
-        tri_uv = values[corner_uv_indices(topology, uvs)[tri_corners]]  # (T, 3, 2)
+        tri_uv = values[_corner_uv_indices(topology, uvs)[tri_corners]]  # (T, 3, 2)
         tile = np.floor(tri_uv.mean(axis=1)).astype(np.int64)  # (T, 2)
         if len(tile) and (tile[:, 0].min() < 0 or tile[:, 0].max() > 9 or tile[:, 1].min() < 0):
             raise ValueError(
@@ -92,7 +92,13 @@ class UVBaker:
             local = tri_uv[members] - [u_tile, v_tile]
             xy = np.stack([local[..., 0], 1.0 - local[..., 1]], axis=-1).reshape(-1, 2) * resolution
             frags = rasterize(xy, None, np.arange(3 * len(members)).reshape(-1, 3), resolution, resolution)
-            self.tiles[int(number)] = _Tile(frags.pixel, tri_vertices[members[frags.triangle]], frags.bary)
+            texels = resolution * resolution
+            rows = np.repeat(frags.pixel, 3)
+            cols = tri_vertices[members[frags.triangle]].ravel()
+            weights = sp.csr_matrix((frags.bary.ravel(), (rows, cols)), shape=(texels, self.point_count))
+            coverage = np.zeros(texels, dtype=np.float32)
+            coverage[frags.pixel] = 1.0
+            self.tiles[int(number)] = _Tile(weights, coverage)
 
     def bake(self, values: np.ndarray) -> dict[int, np.ndarray]:
         """UDIM -> (F, res, res, 4) float32 maps: RGB = the interpolated value, A = coverage.
@@ -100,27 +106,25 @@ class UVBaker:
         `values` are per-vertex vectors, (N, 3) for one frame or (F, N, 3).
         """
         vals = np.asarray(values, dtype=np.float32)
-        single = vals.ndim == 2
-        if single:
+        if vals.ndim == 2:
             vals = vals[None]
         if vals.ndim != 3 or vals.shape[1:] != (self.point_count, 3):
-            raise ValueError(f"values must be ({self.point_count}, 3) or (F, {self.point_count}, 3), got {np.shape(values)}")
-        res = self.resolution
+            n = self.point_count
+            raise ValueError(f"values must be ({n}, 3) or (F, {n}, 3), got {np.shape(values)}")
+        frames, res = len(vals), self.resolution
+        by_vertex = vals.transpose(1, 0, 2).reshape(self.point_count, 3 * frames)
         maps = {}
         for number, tile in self.tiles.items():
-            out = np.zeros((len(vals), res * res, 4), dtype=np.float32)
-            acc = tile.bary[None, :, 0, None] * vals[:, tile.vertices[:, 0]]
-            for k in (1, 2):
-                acc += tile.bary[None, :, k, None] * vals[:, tile.vertices[:, k]]
-            out[:, tile.pixel, :3] = acc
-            out[:, tile.pixel, 3] = 1.0
-            maps[number] = out.reshape(len(vals), res, res, 4)
+            baked = (tile.weights @ by_vertex).reshape(res * res, frames, 3)
+            out = np.empty((frames, res * res, 4), dtype=np.float32)
+            out[..., :3] = baked.transpose(1, 0, 2)
+            out[..., 3] = tile.coverage
+            maps[number] = out.reshape(frames, res, res, 4)
         return maps
 
     def frames_per_chunk(self) -> int:
         """How many frames `write_offset_maps` bakes at once, to bound memory."""
-        texels = max((len(t.pixel) for t in self.tiles.values()), default=1)
-        return max(1, _CHUNK_FLOATS // (4 * max(texels, self.resolution**2)))
+        return max(1, _CHUNK_FLOATS // (4 * self.resolution**2 * max(len(self.tiles), 1)))
 
 
 def offset_map_path(folder: str | os.PathLike, name: str, udim_number: int, frame: int) -> Path:
@@ -148,12 +152,13 @@ def write_offset_maps(
         raise ValueError(f"cannot write offset maps: folder {folder} does not exist")
     if pixel_type not in ("half", "float"):
         raise ValueError(f"pixel_type must be 'half' or 'float', got {pixel_type!r}")
-    if not name or "/" in name or os.sep in name:
+    if not name or Path(name).name != name:
         raise ValueError(f"name must be a plain file name stem, got {name!r}")
     offs = np.asarray(offsets)
     frame_numbers = np.asarray(frames, dtype=np.float64)
-    if offs.ndim != 3 or frame_numbers.shape != (len(offs),):
-        raise ValueError(f"offsets must be (F, N, 3) with F frame numbers, got {offs.shape} and {frame_numbers.shape}")
+    n = baker.point_count
+    if offs.ndim != 3 or offs.shape[1:] != (n, 3) or frame_numbers.shape != (len(offs),):
+        raise ValueError(f"offsets must be (F, {n}, 3) with F frame numbers, got {offs.shape} and {frame_numbers.shape}")
     if not np.all(frame_numbers == np.round(frame_numbers)):
         raise ValueError("offset maps are named by integer frame numbers; got fractional frames")
     paths = []
