@@ -40,7 +40,7 @@ def _get(prim: Usd.Prim, name: str, dtype) -> np.ndarray | None:
 class FaceAttributes:
     """The static FacedynFaceAPI values of a face mesh."""
 
-    role: str = "captured"
+    role: str | None = "captured"  # None: this layer says nothing about the role
     rest_points: np.ndarray | None = None
     skin_samples: np.ndarray | None = None
     rigid_weights: np.ndarray | None = None
@@ -59,7 +59,8 @@ class FaceAttributes:
 
     def write(self, prim: Usd.Prim) -> None:
         prim.ApplyAPI(FACE_API)
-        prim.CreateAttribute(ROLE_ATTR, Sdf.ValueTypeNames.Token).Set(self.role)
+        if self.role is not None:
+            prim.CreateAttribute(ROLE_ATTR, Sdf.ValueTypeNames.Token).Set(self.role)
         arrays = (
             (REST_POINTS_ATTR, Sdf.ValueTypeNames.Point3fArray, Vt.Vec3fArray, self.rest_points, np.float32),
             (SKIN_SAMPLES_ATTR, Sdf.ValueTypeNames.IntArray, Vt.IntArray, self.skin_samples, np.int32),
