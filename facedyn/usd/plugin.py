@@ -32,9 +32,16 @@ def plugin_root() -> Path:
 
 
 def export_line() -> str:
-    """The shell line that lets usdview and DCCs (which start USD before facedyn) find the plugins."""
+    """The shell lines that let usdview and DCCs (which start USD before facedyn) find the plugins.
+
+    PXR_PLUGINPATH_NAME finds the schemas and the usdview plugin; PYTHONPATH lets usdview
+    import the plugin's module (facedynUsdview).
+    """
     root = plugin_root()
-    return f'export PXR_PLUGINPATH_NAME="{root}${{PXR_PLUGINPATH_NAME:+{os.pathsep}$PXR_PLUGINPATH_NAME}}"'
+    return (
+        f'export PXR_PLUGINPATH_NAME="{root}${{PXR_PLUGINPATH_NAME:+{os.pathsep}$PXR_PLUGINPATH_NAME}}"\n'
+        f'export PYTHONPATH="{root}${{PYTHONPATH:+{os.pathsep}$PYTHONPATH}}"'
+    )
 
 
 def register_plugins() -> None:
@@ -51,5 +58,6 @@ def register_plugins() -> None:
     if missing:
         raise PluginRegistrationError(
             "USD's schema registry was built before facedyn registered its plugins, so it lacks "
-            f"{', '.join(missing)}. Import facedyn before anything opens a stage, or run: {export_line()}"
+            f"{', '.join(missing)}. Import facedyn before anything opens a stage, or set "
+            f"PXR_PLUGINPATH_NAME={plugin_root()} first (`usdfacedyn env` prints the lines)"
         )
