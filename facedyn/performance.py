@@ -78,6 +78,7 @@ class Performance:
     rigid_weights: np.ndarray | None = None  # (N,) float32 in [0, 1]
     face_vertices: np.ndarray | None = None  # int32 indices of the face region
     skin_samples: np.ndarray | None = None  # int32 vertex indices
+    alignment_vertices: np.ndarray | None = None  # (3,) eye corners L/R and under the nose
     landmarks: np.ndarray | None = None  # (L, 3) skull-space skull landmarks
     offsets: np.ndarray | None = None  # (F, N, 3) float32 dynamics offsets (skull space)
     solve_error: np.ndarray | None = None  # (F,) float32 per-frame stabilization error

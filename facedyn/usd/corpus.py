@@ -43,7 +43,8 @@ def write_simulated_take(folder: Path, take: SimulatedTake, rig: FaceRig) -> dic
     timing = Timing(take.fps, take.fps, float(frames[0]), float(frames[-1]))
     spec = {k: v for k, v in asdict(take.spec).items() if v is not None}
     face = schema.FaceAttributes(
-        role="captured", rest_points=rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices
+        role="captured", rest_points=rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices,
+        alignment_vertices=alignment_vertices(rig),
     )
     capture = write_layer(
         folder / "capture.usdc",
@@ -75,6 +76,14 @@ def write_simulated_take(folder: Path, take: SimulatedTake, rig: FaceRig) -> dic
         "peak_offset_mm": round(float(magnitude.max()) * 10, 3),
         "rms_offset_mm": round(float(np.sqrt(np.mean(face_magnitude**2))) * 10, 3),
     }
+
+
+def alignment_vertices(rig: FaceRig) -> np.ndarray | None:
+    """The rig's outer eye corners and under-nose vertex, when it names them."""
+    names = ("eye_corner_left", "eye_corner_right", "nose_base")
+    if not all(name in rig.landmarks for name in names):
+        return None
+    return np.array([rig.landmarks[name] for name in names], np.int32)
 
 
 def _provenance(processor: str, spec: dict, frames: np.ndarray, inputs: list[str]) -> schema.Provenance:

@@ -25,6 +25,7 @@ REST_POINTS_ATTR = "facedyn:face:restPoints"
 SKIN_SAMPLES_ATTR = "facedyn:face:skinSamples"
 RIGID_WEIGHTS_ATTR = "facedyn:face:rigidWeights"
 FACE_VERTICES_ATTR = "facedyn:face:faceVertices"
+ALIGNMENT_VERTICES_ATTR = "facedyn:face:alignmentVertices"
 OFFSETS_ATTR = "primvars:facedyn:dynamicsOffset"
 
 
@@ -45,6 +46,7 @@ class FaceAttributes:
     skin_samples: np.ndarray | None = None
     rigid_weights: np.ndarray | None = None
     face_vertices: np.ndarray | None = None
+    alignment_vertices: np.ndarray | None = None  # (3,) eye corners L/R, under the nose
 
     @classmethod
     def read(cls, prim: Usd.Prim) -> "FaceAttributes":
@@ -55,6 +57,7 @@ class FaceAttributes:
             skin_samples=_get(prim, SKIN_SAMPLES_ATTR, np.int32),
             rigid_weights=_get(prim, RIGID_WEIGHTS_ATTR, np.float32),
             face_vertices=_get(prim, FACE_VERTICES_ATTR, np.int32),
+            alignment_vertices=_get(prim, ALIGNMENT_VERTICES_ATTR, np.int32),
         )
 
     def write(self, prim: Usd.Prim) -> None:
@@ -66,6 +69,7 @@ class FaceAttributes:
             (SKIN_SAMPLES_ATTR, Sdf.ValueTypeNames.IntArray, Vt.IntArray, self.skin_samples, np.int32),
             (RIGID_WEIGHTS_ATTR, Sdf.ValueTypeNames.FloatArray, Vt.FloatArray, self.rigid_weights, np.float32),
             (FACE_VERTICES_ATTR, Sdf.ValueTypeNames.IntArray, Vt.IntArray, self.face_vertices, np.int32),
+            (ALIGNMENT_VERTICES_ATTR, Sdf.ValueTypeNames.IntArray, Vt.IntArray, self.alignment_vertices, np.int32),
         )
         for name, type_name, vt_type, value, dtype in arrays:
             if value is not None:

@@ -128,6 +128,7 @@ def read_performance(
         rigid_weights=face.rigid_weights,
         face_vertices=face.face_vertices,
         skin_samples=face.skin_samples,
+        alignment_vertices=face.alignment_vertices,
         landmarks=landmarks,
         offsets=offsets,
         solve_error=solve_error,
