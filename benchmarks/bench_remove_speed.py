@@ -1,0 +1,125 @@
+"""Speed of dynamics removal on an ICT-sized mesh, each step beside its reference.
+
+Prints one JSON object per case:
+- features: B(t) and X_i(t) for 1,000 frames x 344 samples, NumPy vs the OpenCL kernel;
+- laplacian: the batched sparse Laplacian on 11,248 points x 1,000 frames, SciPy vs OpenCL;
+- removal: the whole of remove_dynamics (features, network F, propagation, subtraction) on
+  1,000 frames, in frames per second, excluding I/O and the one-off propagation build.
+
+The mesh is a synthetic curved sheet of 148 x 76 = 11,248 points (the ICT-FaceKit skin's
+count) with a rigid top band, and the model is randomly initialised: speed does not depend
+on the weights. Times are the best of ``--repeats`` runs after a warm-up run.
+
+    python benchmarks/bench_remove_speed.py [--frames 1000] [--repeats 3] [--torch-threads N]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+
+import numpy as np
+import torch
+
+from facedyn.dynamics.face import FaceSetup
+from facedyn.dynamics.features import compute_features
+from facedyn.dynamics.modelfile import DynamicsModel
+from facedyn.dynamics.network import Network, removal_spec
+from facedyn.dynamics.propagate import laplacian_apply
+from facedyn.dynamics.removal import remove_dynamics
+from facedyn.dynamics.skull import to_world
+from facedyn.geometry import quaternion
+from facedyn.kernels import runtime
+from facedyn.performance import Topology
+
+ROWS, COLS, FPS, SAMPLES = 148, 76, 120.0, 344
+
+
+def sheet() -> tuple[np.ndarray, Topology, np.ndarray]:
+    """(points, topology, rigid vertices) of a 20 x 16 cm sheet bent like a face."""
+    ys, xs = np.mgrid[0:ROWS, 0:COLS].astype(np.float64)
+    angle = (xs / (COLS - 1) - 0.5) * 1.6
+    points = np.stack([10 * np.sin(angle), (ys / (ROWS - 1) - 0.5) * 20, 10 * np.cos(angle) + 0.3 * np.sin(ys / 3)], -1).reshape(-1, 3)
+    a = (np.arange(ROWS - 1)[:, None] * COLS + np.arange(COLS - 1)[None, :]).ravel()
+    tris = np.concatenate([np.stack([a, a + 1, a + COLS + 1], 1), np.stack([a, a + COLS + 1, a + COLS], 1)])
+    rigid = np.arange((ROWS - 12) * COLS, ROWS * COLS)
+    return points, Topology(np.full(len(tris), 3, np.int32), tris.ravel().astype(np.int32)), rigid
+
+
+def take(points: np.ndarray, frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(skull-space points float32, translate, orient): a bobbing head with jiggling skin."""
+    time_s = np.arange(frames) / FPS
+    translate = np.stack([0.5 * np.sin(time_s), 150 + 0.3 * np.sin(2 * np.pi * 8 * time_s), 0.2 * time_s], 1)
+    orient = quaternion.from_rotvec(np.stack([0.05 * np.sin(2 * np.pi * 8 * time_s), 0.1 * np.sin(time_s), 0 * time_s], 1))
+    jiggle = 0.2 * np.sin(2 * np.pi * 8 * time_s + 1.0)[:, None, None] * np.array([0.0, 1.0, 0.3])
+    return (points[None] + jiggle).astype(np.float32), translate, orient
+
+
+def best_of(fn, repeats: int) -> float:
+    fn()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def emit(record: dict) -> None:
+    record.update(cpu_count=os.cpu_count(), torch_threads=torch.get_num_threads())
+    if runtime.available():
+        record["device"] = runtime.describe()
+    print(json.dumps(record), flush=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=1000)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--torch-threads", type=int, default=None, help="torch's CPU threads (default: torch's choice)")
+    args = parser.parse_args()
+    if args.torch_threads:
+        torch.set_num_threads(args.torch_threads)
+    backends = ["numpy"] + (["opencl"] if runtime.available() else [])
+
+    points, topology, rigid = sheet()
+    start = time.perf_counter()
+    face = FaceSetup.build(topology, points, rigid_vertices=rigid, sample_count=SAMPLES)
+    setup_s = time.perf_counter() - start
+    torch.manual_seed(0)
+    model = DynamicsModel("removal", Network(removal_spec()), face, FPS, {"skull": 10, "skin": 10, "target": 10})
+    start = time.perf_counter()
+    propagator = model.propagator()
+    build_s = time.perf_counter() - start
+    skull_points, translate, orient = take(points, args.frames)
+
+    world_samples = to_world(skull_points[:, face.samples], translate, orient).astype(np.float32)
+    ref = compute_features(world_samples, translate, orient, face.landmarks, FPS, space="world", backend="numpy")
+    for backend in backends:
+        seconds = best_of(lambda: compute_features(world_samples, translate, orient, face.landmarks, FPS, space="world", backend=backend), args.repeats)
+        out = compute_features(world_samples, translate, orient, face.landmarks, FPS, space="world", backend=backend)
+        diff = max(np.abs(out.skin - ref.skin).max() / np.abs(ref.skin).max(), np.abs(out.skull - ref.skull).max() / np.abs(ref.skull).max())
+        emit({"case": "features", "backend": backend, "frames": args.frames, "samples": SAMPLES, "seconds": seconds,
+              "frames_per_s": args.frames / seconds, "max_rel_diff_vs_numpy": float(diff)})
+
+    u = propagator.apply(np.random.default_rng(0).normal(0, 0.2, (args.frames, SAMPLES, 3)))
+    ref = laplacian_apply(propagator.laplacian, u, "numpy")
+    for backend in backends:
+        seconds = best_of(lambda: laplacian_apply(propagator.laplacian, u, backend), args.repeats)
+        diff = np.abs(laplacian_apply(propagator.laplacian, u, backend) - ref).max() / np.abs(ref).max()
+        emit({"case": "laplacian", "backend": backend, "points": len(points), "frames": args.frames, "seconds": seconds,
+              "frames_per_s": args.frames / seconds, "max_rel_diff_vs_numpy": float(diff)})
+
+    for backend in backends:
+        seconds = best_of(lambda: remove_dynamics(skull_points, translate, orient, FPS, model, backend), args.repeats)
+        _, offsets = remove_dynamics(skull_points, translate, orient, FPS, model, backend)
+        residual = propagator.residual(offsets, "numpy")
+        emit({"case": "removal", "features_backend": backend, "points": len(points), "samples": SAMPLES, "frames": args.frames,
+              "seconds": seconds, "frames_per_s": args.frames / seconds, "target_frames_per_s": 300,
+              "one_off_setup_s": {"samples_and_landmarks": setup_s, "propagation_matrix": build_s},
+              "smoothness_residual_median": float(np.median(residual))})
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,122 @@
+"""The dynamics networks: fully connected ReLU MLPs that carry their own normalization.
+
+Removal network F (papers/000 §5.2): [B(t), X_i(t)] (315 + 63) -> dx_i(t) (3), two hidden
+layers of 128, one network shared by all samples. Synthesis network H (§6) has the same
+form, [B(t), S(t)] (315 + 2 per sample) -> dY(t) (3 per sample), two hidden layers of 256,
+so both are a `Network` built from a `NetworkSpec`, saved and loaded the same way
+(facedyn.dynamics.modelfile).
+
+Inputs are standardized per feature and outputs by a per-coordinate mean and one common
+scale; the statistics are buffers of the module, so they travel with the weights and a
+loaded network takes raw features and returns offsets in centimetres. A single output
+scale keeps the training loss proportional to the paper's plain L2 loss on offsets.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+REMOVAL_HIDDEN = (128, 128)
+SYNTHESIS_HIDDEN = (256, 256)
+
+
+@dataclass(frozen=True)
+class NetworkSpec:
+    """The shape of an MLP: input size, hidden layer sizes, output size (ReLU between)."""
+
+    inputs: int
+    hidden: tuple[int, ...]
+    outputs: int
+
+    def __post_init__(self) -> None:
+        sizes = (self.inputs, *self.hidden, self.outputs)
+        if any(int(s) != s or s < 1 for s in sizes):
+            raise ValueError(f"network layer sizes must be positive whole numbers, got {sizes}")
+
+    def to_json(self) -> dict:
+        return {"inputs": int(self.inputs), "hidden": [int(h) for h in self.hidden], "outputs": int(self.outputs), "activation": "relu"}
+
+    @classmethod
+    def from_json(cls, data: dict) -> "NetworkSpec":
+        if data.get("activation", "relu") != "relu":
+            raise ValueError(f"unsupported activation {data.get('activation')!r}; facedyn networks use relu")
+        try:
+            return cls(int(data["inputs"]), tuple(int(h) for h in data["hidden"]), int(data["outputs"]))
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"network architecture needs inputs, hidden and outputs, got {data!r}") from exc
+
+
+def resolve_device(device: str) -> torch.device:
+    """``'auto'`` = the GPU when torch sees one, else the CPU; anything else as torch reads it."""
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(device)
+
+
+def removal_spec(skull_features: int = 315, skin_features: int = 63) -> NetworkSpec:
+    return NetworkSpec(skull_features + skin_features, REMOVAL_HIDDEN, 3)
+
+
+class Network(nn.Module):
+    """An MLP on raw features that returns raw (un-normalized) outputs."""
+
+    def __init__(self, spec: NetworkSpec):
+        super().__init__()
+        self.spec = spec
+        sizes = (spec.inputs, *spec.hidden, spec.outputs)
+        layers: list[nn.Module] = []
+        for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
+            layers.append(nn.Linear(a, b))
+            if i < len(sizes) - 2:
+                layers.append(nn.ReLU())
+        self.layers = nn.Sequential(*layers)
+        self.register_buffer("input_mean", torch.zeros(spec.inputs))
+        self.register_buffer("input_std", torch.ones(spec.inputs))
+        self.register_buffer("output_mean", torch.zeros(spec.outputs))
+        self.register_buffer("output_scale", torch.ones(1))
+
+    def set_normalization(self, input_mean, input_std, output_mean, output_scale) -> None:
+        """Standardization statistics; zero spreads become 1 so constant inputs pass as 0."""
+        std = np.asarray(input_std, dtype=np.float64)
+        std = np.where(std > 1e-12, std, 1.0)
+        scale = float(output_scale) if output_scale > 1e-12 else 1.0
+        for name, value in (("input_mean", input_mean), ("input_std", std), ("output_mean", output_mean), ("output_scale", [scale])):
+            buf = getattr(self, name)
+            buf.copy_(torch.as_tensor(np.asarray(value, dtype=np.float32).reshape(buf.shape)))
+
+    def normalized(self, x: torch.Tensor) -> torch.Tensor:
+        """The network's output in normalized units (what the loss compares)."""
+        return self.layers((x - self.input_mean) / self.input_std)
+
+    def normalize_targets(self, y: torch.Tensor) -> torch.Tensor:
+        return (y - self.output_mean) / self.output_scale
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.normalized(x) * self.output_scale + self.output_mean
+
+    def forward_split(self, shared: torch.Tensor, items: torch.Tensor) -> torch.Tensor:
+        """forward(concat(shared[f], items[f, i])) for all f, i, without the concatenation.
+
+        shared: (F, Ds) inputs common to every item of a frame (B(t)); items: (F, I, Di)
+        per-item inputs (X_i(t)). The first layer splits into a per-frame part computed
+        once per frame and a per-item part with the normalization folded into its
+        weights, so removal never builds the (F, I, Ds + Di) input.
+        """
+        ds = shared.shape[-1]
+        if ds + items.shape[-1] != self.spec.inputs:
+            raise ValueError(f"inputs of sizes {ds} + {items.shape[-1]} do not add up to the network's {self.spec.inputs}")
+        first = self.layers[0]
+        w_shared = first.weight[:, :ds] / self.input_std[:ds]
+        w_items = first.weight[:, ds:] / self.input_std[ds:]
+        bias = first.bias - w_shared @ self.input_mean[:ds] - w_items @ self.input_mean[ds:]
+        per_frame = shared @ w_shared.T + bias  # (F, H)
+        hidden = torch.matmul(items, w_items.T)  # (F, I, H)
+        hidden += per_frame[:, None, :]
+        h = hidden.view(-1, hidden.shape[-1])
+        for layer in self.layers[1:]:  # in place where it can: these tensors are large
+            h = h.relu_() if isinstance(layer, nn.ReLU) else torch.addmm(layer.bias, h, layer.weight.T)
+        h = h.mul_(self.output_scale).add_(self.output_mean)
+        return h.view(items.shape[0], items.shape[1], -1)

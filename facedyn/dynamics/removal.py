@@ -1,0 +1,82 @@
+"""Removing secondary dynamics from a take with a trained network F (papers/000 eq. 7).
+
+For every frame and skin sample, F(B(t), X_i(t)) predicts the dynamic offset dx_i(t), a
+skull-frame vector; Laplacian deformation spreads the sample offsets to every vertex
+(facedyn.dynamics.propagate), and the quasistatic skin in skull space is
+
+    T(t)^-1 y(t) = T(t)^-1 x(t) - dx(t)        (eq. 7, y = x - T(t) F, read in skull space)
+
+Frames are processed in large chunks: features for the chunk in one batched call, the
+network on all its (frame, sample) pairs at once with the skull-feature part of the first
+layer computed once per frame (Network.forward_split), then one matrix product for the
+propagation. No step loops over frames in Python.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from facedyn.dynamics.features import check_fps, compute_features
+from facedyn.dynamics.modelfile import DynamicsModel
+from facedyn.dynamics.network import resolve_device
+from facedyn.dynamics.skull import check_points, check_transforms
+from facedyn.geometry import quaternion
+
+CHUNK_FRAMES = 128
+
+
+def remove_dynamics(
+    points,
+    translate,
+    orient,
+    fps: float,
+    model: DynamicsModel,
+    backend: str = "auto",
+    *,
+    space: str = "skull",
+    chunk_frames: int = CHUNK_FRAMES,
+    device: str = "auto",
+) -> tuple[np.ndarray, np.ndarray]:
+    """(quasistatic skull-space points (F, N, 3), offsets (F, N, 3)), both float32.
+
+    points: the captured skin, skull space (``space='skull'``, the stabilized layer's
+    points) or world space (``'world'``); translate/orient: the skull T(t) (None =
+    identity); fps: the take's rate, which must be the model's; backend: the features'
+    ``'auto' | 'opencl' | 'numpy'``; device: torch device for the network. The offsets are
+    skull-frame vectors, zero on the rigid region; quasistatic = skull points - offsets.
+    """
+    if model.kind != "removal":
+        raise ValueError(f"remove_dynamics needs a removal model, got a {model.kind!r} model")
+    pts = check_points(points)
+    f, n = pts.shape[:2]
+    if n != model.face.point_count:
+        raise ValueError(f"the take has {n} points per frame, the model's mesh {model.face.point_count}")
+    if space not in ("skull", "world"):
+        raise ValueError(f"space must be 'skull' or 'world', got {space!r}")
+    if int(chunk_frames) != chunk_frames or chunk_frames < 1:
+        raise ValueError(f"chunk_frames must be a positive whole number, got {chunk_frames}")
+    model.check_compatible(fps=check_fps(fps))
+    t, q = check_transforms(translate, orient, f)
+    skull_points = _to_skull32(pts, t, q) if space == "world" else np.asarray(pts, dtype=np.float32)
+    # The samples in float64 from the input itself, so world-space features lose nothing
+    # to the float32 skull-space copy above.
+    sample_points = pts[:, model.face.samples].astype(np.float64)
+    propagator = model.propagator()
+    network = model.network.to(resolve_device(device)).eval()
+    dev = next(network.parameters()).device
+    window = model.windows["skull"]
+    offsets = np.empty((f, n, 3), np.float32)
+    with torch.inference_mode():
+        for a in range(0, f, int(chunk_frames)):
+            b = min(f, a + int(chunk_frames))
+            feats = compute_features(sample_points, t, q, model.face.landmarks, fps, space=space, window=window, frame_range=(a, b), backend=backend)
+            d = network.forward_split(torch.from_numpy(feats.skull).to(dev), torch.from_numpy(feats.skin).to(dev))
+            propagator.apply_into(d.cpu().numpy(), offsets[a:b])
+    quasistatic = skull_points - offsets
+    return quasistatic, offsets
+
+
+def _to_skull32(world: np.ndarray, t: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """R^T (x - t) in float32 as one batched product ((x - t) as rows times R)."""
+    rot = quaternion.to_matrix(q).astype(np.float32)
+    return np.matmul(np.asarray(world, dtype=np.float32) - t[:, None, :].astype(np.float32), rot)

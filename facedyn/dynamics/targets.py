@@ -1,0 +1,51 @@
+"""Quasistatic training targets for held expressions (papers/000 §5.2, eqs. 5-6).
+
+While an expression is held, the skin should move rigidly with the skull; what the skin
+does beyond that within a short window (2w+1 = 21 frames, 175 ms at 120 fps) is
+secondary dynamics. So the quasistatic skin is a centred moving average in skull space,
+
+    y_i(t) = T(t) * mean_{k=t-w..t+w} T(k)^-1 x_i(k)          (5)
+
+and the dynamic offset, a skull-frame vector, is
+
+    dx_i(t) = T(t)^-1 (x_i(t) - y_i(t)) = T(t)^-1 x_i(t) - mean_k T(k)^-1 x_i(k)   (6)
+
+(T^-1 of a difference of points is the rotation R^T alone). Ends: the window's indices are
+clamped to [0, F-1], so near the ends the first or last frame counts several times and the
+divisor stays 2w+1; the first and last w frames' targets are therefore biased towards the
+end frames, which is why training can leave them out (facedyn.dynamics.training).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from facedyn.dynamics.skull import check_points, check_transforms, skull_space, to_world
+
+TARGET_WINDOW = 10
+
+
+def moving_average(values, window: int = TARGET_WINDOW) -> np.ndarray:
+    """Centred mean over frames t-w..t+w of (F, ...) values, indices clamped, float64."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim < 1 or len(v) == 0:
+        raise ValueError(f"values must have a non-empty frame axis, got shape {v.shape}")
+    if int(window) != window or window < 0:
+        raise ValueError(f"window must be a non-negative whole number of frames, got {window}")
+    w = int(window)
+    padded = np.pad(v, [(w, w)] + [(0, 0)] * (v.ndim - 1), mode="edge")
+    csum = np.concatenate([np.zeros((1,) + v.shape[1:]), np.cumsum(padded, axis=0)])
+    f = len(v)
+    return (csum[2 * w + 1: 2 * w + 1 + f] - csum[:f]) / (2 * w + 1)
+
+
+def dynamic_offsets(points, translate=None, orient=None, *, space: str = "skull", window: int = TARGET_WINDOW) -> np.ndarray:
+    """(F, S, 3) dx_i(t) of eq. (6), skull-frame vectors, float64."""
+    p = skull_space(points, translate, orient, space)
+    return p - moving_average(p, window)
+
+
+def quasistatic_targets(points, translate, orient, *, space: str = "world", window: int = TARGET_WINDOW) -> np.ndarray:
+    """(F, S, 3) y_i(t) of eq. (5) in world space, float64."""
+    p = skull_space(points, translate, orient, space)
+    t, q = check_transforms(translate, orient, len(check_points(points)))
+    return to_world(moving_average(p, window), t, q)
