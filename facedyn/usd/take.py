@@ -37,7 +37,13 @@ def read_take(
     path: str | os.PathLike, mesh: str | None = None, frames: tuple[float, float] | None = None
 ) -> tuple[Performance, TakeSource]:
     """Read the face of a take (the mesh with FacedynFaceAPI, or `mesh`) over `frames` (inclusive)."""
-    stage = open_stage(path)
+    return read_stage(open_stage(path), Path(path), mesh, frames)
+
+
+def read_stage(
+    stage: Usd.Stage, path: Path, mesh: str | None = None, frames: tuple[float, float] | None = None
+) -> tuple[Performance, TakeSource]:
+    """read_take on an open stage (e.g. one composed in memory); `path` names it in messages."""
     mesh_prim = get_prim(stage, mesh) if mesh else find_face_mesh(stage)
     if not mesh_prim.IsA(UsdGeom.Mesh):
         raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()} is a {mesh_prim.GetTypeName() or 'typeless prim'}, expected a Mesh")
@@ -47,7 +53,7 @@ def read_take(
     time_codes = select_time_codes(stage, mesh_prim, frames)
     performance = read_performance(stage, mesh_prim, skull_prim, time_codes)
     source = TakeSource(
-        path=Path(path),
+        path=path,
         stage=stage,
         mesh_path=str(mesh_prim.GetPath()),
         skull_path=str(skull_prim.GetPath()) if skull_prim else None,

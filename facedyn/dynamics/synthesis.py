@@ -1,0 +1,303 @@
+"""Synthesizing secondary dynamics for a new skull motion with network H (papers/000 §6).
+
+H maps the skull's motion B(t) (facedyn.dynamics.features, the same 315 landmark
+velocities as removal) and the surface stretch S(t) of every skin sample
+(facedyn.dynamics.stretch, eq. 8, measured on the quasistatic shape against the neutral)
+to the dynamic offsets dY(t) of all samples jointly: one example per frame, input
+315 + 2 S, output 3 S. Stretch tells H the expression, which changes how the tissue
+moves; only the whole face's stretch says which expression it is, hence one joint network.
+
+Training (`train_synthesis`) needs, per take, the quasistatic skin y(t) and the captured
+skin x(t), both in skull space; the targets are dY(t) = x(t) - y(t) at the samples. y(t)
+comes either from a removal model F run on the takes, as the paper does, or straight from
+the caller (e.g. the simulator's true quasistatic shapes). Settings as the paper: two
+hidden layers of 256, ReLU, L2, Adam lr 1e-3, batches of 50 frames, about 30 epochs;
+validation holds out whole takes. The model file keeps everything inference needs: the
+uv neighbourhoods and the neutral's difference lengths beside the usual face setup.
+
+Synthesis (`synthesize_dynamics`) runs on whole blocks of frames: B(t) of the new skull
+motion, S(t) of the quasistatic shape, H, then the Laplacian propagation to every vertex
+(facedyn.dynamics.propagate); the result is quasistatic + offsets, in skull space.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict
+from typing import Mapping, Sequence
+
+import numpy as np
+import torch
+
+from facedyn.dynamics.face import FaceSetup
+from facedyn.dynamics.features import check_fps, skull_velocities, windows
+from facedyn.dynamics.modelfile import DynamicsModel
+from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec, resolve_device
+from facedyn.dynamics.removal import remove_dynamics
+from facedyn.dynamics.skull import check_points, check_transforms, skull_space
+from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
+from facedyn.dynamics.training import ProgressCallback, Take, TrainConfig, _split, fit
+from facedyn.performance import UVs
+
+EPOCHS = 30
+BATCH_FRAMES = 50
+CHUNK_FRAMES = 1024
+
+# Model arrays (DynamicsModel.arrays) that hold the stretch setup; one_sided is stored as
+# int32 because model files hold numbers only.
+_STRETCH = "stretch/"
+
+
+def synthesis_config(**changes) -> TrainConfig:
+    """The paper's settings for H (30 epochs, batches of 50 frames), with any changes."""
+    return TrainConfig(**{"epochs": EPOCHS, "batch_size": BATCH_FRAMES, **changes})
+
+
+def skull_features(translate, orient, landmarks, fps: float, window: int) -> np.ndarray:
+    """(F, L (2w+1) 3) float32 B(t): the removal network's skull features, without X_i(t)."""
+    b = windows(skull_velocities(translate, orient, landmarks, fps).astype(np.float32), window)
+    return b.reshape(len(b), -1)
+
+
+class FrameSet:
+    """Synthesis examples, one per frame: input [B(t), S(t)], target dY(t) of all samples."""
+
+    def __init__(self, inputs: np.ndarray, targets: np.ndarray, device: torch.device):
+        self.inputs = torch.from_numpy(inputs).to(device)
+        self.targets = torch.from_numpy(targets).to(device)
+
+    def __len__(self) -> int:
+        return len(self.inputs)
+
+    def gather(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.inputs[idx], self.targets[idx]
+
+
+def train_synthesis(
+    takes: Sequence,
+    face: FaceSetup,
+    neighbourhoods: UVNeighbourhoods | UVs,
+    quasistatic: DynamicsModel | Mapping[str, np.ndarray],
+    config: TrainConfig | None = None,
+    progress: ProgressCallback | None = None,
+    backend: str = "auto",
+) -> DynamicsModel:
+    """Train network H on the takes (Take objects or dicts) for the given face setup.
+
+    neighbourhoods: the stretch neighbourhoods of ``face.samples`` on ``face.rest_points``,
+    or the mesh's uvs to build them from (2 mm differences). quasistatic: where y(t) comes
+    from, either a removal model (kind 'removal', the paper's way: y = F's quasistatic
+    output on each take) or a mapping from take name to (F, N, 3) skull-space y(t) for
+    every take. config defaults to `synthesis_config()`; frames within ``config.trim`` of
+    a take's ends are left out, the validation takes are held out whole. ``backend``
+    picks the stretch (and removal) kernels (facedyn.kernels.runtime.choose_backend).
+    """
+    config = config or synthesis_config()
+    takes = [Take.coerce(t) for t in takes]
+    if not takes:
+        raise ValueError("training needs at least one take")
+    rates = {t.name: check_fps(t.fps) for t in takes}
+    fps = rates[takes[0].name]
+    if any(abs(r - fps) > 1e-6 * fps for r in rates.values()):
+        raise ValueError(f"takes run at different frame rates {rates}; a model is trained for one rate")
+    held = _split(takes, config.validation)
+    source = _source_description(quasistatic, takes, face, fps)
+    nb = _neighbourhoods(neighbourhoods, face)
+    lengths = difference_lengths(face.rest_points.astype(np.float32), nb).astype(np.float32)
+    prepared = {t.name: _prepare(t, face, nb, lengths, quasistatic, config, backend) for t in takes}
+    device = resolve_device(config.device)
+    train = _frames([prepared[t.name] for t in takes if t.name not in held], device)
+    val = _frames([prepared[t.name] for t in takes if t.name in held], device)
+
+    spec = NetworkSpec(train.inputs.shape[1], SYNTHESIS_HIDDEN, train.targets.shape[1])
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        network = Network(spec)
+    network.set_normalization(*_normalization(train))
+    network.to(device)
+    curve = fit(network, train, val, config, progress)
+    errors = _validation_errors(network, val) if val is not None else None
+    network.cpu()
+    info = {
+        "training": {
+            "takes": [{"name": t.name, "frames": int(len(t.points)), "space": t.space, "validation": t.name in held} for t in takes],
+            "train_frames": len(train),
+            "quasistatic_source": source,
+            "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()},
+            "device": str(device),
+        },
+        "validation": errors,
+        "loss_curve": curve,
+    }
+    return DynamicsModel(
+        kind="synthesis", network=network, face=face, fps=fps, windows={"skull": config.window}, info=info,
+        arrays=stretch_arrays(nb, lengths),
+    )
+
+
+def synthesize_dynamics(
+    quasistatic,
+    translate,
+    orient,
+    fps: float,
+    model: DynamicsModel,
+    backend: str = "auto",
+    *,
+    chunk_frames: int = CHUNK_FRAMES,
+    device: str = "auto",
+) -> tuple[np.ndarray, np.ndarray]:
+    """(points (F, N, 3) = quasistatic + offsets, offsets (F, N, 3)), float32, skull space.
+
+    quasistatic: the dynamics-free skin y(t) in skull space; translate/orient: the new
+    skull motion T(t) (None = identity); fps must be the model's; backend: the stretch
+    kernel's ``'auto' | 'opencl' | 'numpy'``; device: torch device for H. Frames go
+    through in blocks of ``chunk_frames`` (memory only: every step is batched over frames).
+    """
+    if model.kind != "synthesis":
+        raise ValueError(f"synthesize_dynamics needs a synthesis model, got a {model.kind!r} model")
+    y = check_points(quasistatic, "quasistatic")
+    f, n = y.shape[:2]
+    if n != model.face.point_count:
+        raise ValueError(f"the quasistatic take has {n} points per frame, the model's mesh {model.face.point_count}")
+    if int(chunk_frames) != chunk_frames or chunk_frames < 1:
+        raise ValueError(f"chunk_frames must be a positive whole number, got {chunk_frames}")
+    model.check_compatible(fps=check_fps(fps))
+    t, q = check_transforms(translate, orient, f)
+    nb, lengths = model_stretch(model)
+    y = np.ascontiguousarray(y, dtype=np.float32)
+    b = skull_features(t, q, model.face.landmarks, fps, model.windows["skull"])
+    propagator = model.propagator()
+    network = model.network.to(resolve_device(device)).eval()
+    dev = next(network.parameters()).device
+    samples = nb.sample_count
+    offsets = np.empty((f, n, 3), np.float32)
+    points = np.empty((f, n, 3), np.float32)
+    with torch.inference_mode():
+        for a in range(0, f, int(chunk_frames)):
+            z = min(f, a + int(chunk_frames))
+            s = stretch_features(y[a:z], nb, lengths, backend)
+            inputs = np.concatenate([b[a:z], s.reshape(z - a, -1)], axis=1)
+            d = network(torch.from_numpy(inputs).to(dev)).cpu().numpy().reshape(z - a, samples, 3)
+            propagator.apply_into(d, offsets[a:z])
+            np.add(y[a:z], offsets[a:z], out=points[a:z])
+    return points, offsets
+
+
+def stretch_arrays(neighbourhoods: UVNeighbourhoods, neutral_lengths: np.ndarray) -> dict[str, np.ndarray]:
+    """The model arrays that rebuild the stretch features at inference (`model_stretch`)."""
+    nb = neighbourhoods
+    return {
+        _STRETCH + "samples": nb.samples.astype(np.int32),
+        _STRETCH + "vertices": nb.vertices.astype(np.int32),
+        _STRETCH + "weights": nb.weights.astype(np.float32),
+        _STRETCH + "one_sided": nb.one_sided.astype(np.int32),
+        _STRETCH + "uv_steps": nb.uv_steps.astype(np.float64),
+        _STRETCH + "charts": nb.charts.astype(np.int32),
+        _STRETCH + "step": np.array([nb.step], np.float64),
+        _STRETCH + "neutral_lengths": np.asarray(neutral_lengths, np.float32),
+    }
+
+
+def model_stretch(model: DynamicsModel) -> tuple[UVNeighbourhoods, np.ndarray]:
+    """(neighbourhoods, neutral lengths (S, 2)) stored in a synthesis model."""
+    arrays = {k[len(_STRETCH):]: v for k, v in model.arrays.items() if k.startswith(_STRETCH)}
+    missing = {"samples", "vertices", "weights", "one_sided", "uv_steps", "charts", "step", "neutral_lengths"} - set(arrays)
+    if missing:
+        raise ValueError(f"the synthesis model lacks its stretch arrays {sorted(_STRETCH + m for m in missing)}")
+    nb = UVNeighbourhoods(
+        samples=arrays["samples"].astype(np.int32),
+        vertices=arrays["vertices"].astype(np.int32),
+        weights=arrays["weights"].astype(np.float32),
+        one_sided=arrays["one_sided"].astype(bool),
+        uv_steps=arrays["uv_steps"].astype(np.float64),
+        charts=arrays["charts"].astype(np.int32),
+        step=float(arrays["step"][0]),
+    )
+    if not np.array_equal(nb.samples, model.face.samples):
+        raise ValueError("the synthesis model's stretch neighbourhoods belong to other skin samples than its face setup")
+    if nb.vertices.max() >= model.face.point_count:
+        raise ValueError(f"the stretch neighbourhoods use vertex {nb.vertices.max()}, the model's mesh has {model.face.point_count}")
+    lengths = arrays["neutral_lengths"].astype(np.float32)
+    if lengths.shape != (nb.sample_count, 2):
+        raise ValueError(f"the model's neutral lengths must be ({nb.sample_count}, 2), got {lengths.shape}")
+    return nb, lengths
+
+
+def _neighbourhoods(value, face: FaceSetup) -> UVNeighbourhoods:
+    if isinstance(value, UVs):
+        return UVNeighbourhoods.build(face.topology, value, face.rest_points, face.samples)
+    if not isinstance(value, UVNeighbourhoods):
+        raise ValueError(f"neighbourhoods must be UVNeighbourhoods or the mesh's UVs, got {type(value).__name__}")
+    if not np.array_equal(value.samples, face.samples):
+        raise ValueError("the stretch neighbourhoods were built for other skin samples than the face setup's")
+    if value.vertices.max() >= face.point_count:
+        raise ValueError(f"the stretch neighbourhoods use vertex {value.vertices.max()}, the face has {face.point_count}")
+    return value
+
+
+def _source_description(quasistatic, takes: list[Take], face: FaceSetup, fps: float) -> dict:
+    """Check the quasistatic source against the takes; describe it for the model's info."""
+    if isinstance(quasistatic, DynamicsModel):
+        if quasistatic.kind != "removal":
+            raise ValueError(f"quasistatic shapes come from a removal model, got a {quasistatic.kind!r} model")
+        quasistatic.check_compatible(face.topology, fps)
+        return {"kind": "removal", "topology_fingerprint": quasistatic.fingerprint, "validation": quasistatic.info.get("validation")}
+    if not isinstance(quasistatic, Mapping):
+        raise ValueError(f"quasistatic must be a removal model or a mapping of take names to shapes, got {type(quasistatic).__name__}")
+    names = {t.name for t in takes}
+    missing, extra = sorted(names - set(quasistatic)), sorted(set(quasistatic) - names)
+    if missing or extra:
+        raise ValueError(f"quasistatic shapes must be given for exactly the takes: missing {missing}, not a take {extra}")
+    return {"kind": "given"}
+
+
+def _prepare(take: Take, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndarray, quasistatic, config: TrainConfig, backend: str):
+    """(inputs (F', 315 + 2S), targets (F', 3S)) of a take's frames away from its ends."""
+    pts = check_points(take.points, f"take {take.name!r} points")
+    f = len(pts)
+    if pts.shape[1] != face.point_count:
+        raise ValueError(f"take {take.name!r} has {pts.shape[1]} points, the face setup {face.point_count}")
+    if f <= 2 * config.trim:
+        raise ValueError(f"take {take.name!r} has {f} frames, too few to leave out {config.trim} at each end")
+    t, q = check_transforms(take.translate, take.orient, f)
+    if isinstance(quasistatic, DynamicsModel):
+        y, offsets = remove_dynamics(pts, t, q, take.fps, quasistatic, backend, space=take.space)
+        targets = offsets[:, face.samples]
+    else:
+        y = np.asarray(quasistatic[take.name], dtype=np.float32)
+        if y.shape != pts.shape:
+            raise ValueError(f"take {take.name!r}: quasistatic shapes are {y.shape}, its points {pts.shape}")
+        targets = skull_space(pts[:, face.samples], t, q, take.space) - y[:, face.samples]
+    s = stretch_features(y, nb, lengths, backend)
+    b = skull_features(t, q, face.landmarks, take.fps, config.window)
+    keep = slice(config.trim, f - config.trim)
+    inputs = np.concatenate([b, s.reshape(f, -1)], axis=1)[keep]
+    return np.ascontiguousarray(inputs, np.float32), np.ascontiguousarray(targets.reshape(f, -1)[keep], np.float32)
+
+
+def _frames(prepared: list, device: torch.device) -> FrameSet | None:
+    if not prepared:
+        return None
+    return FrameSet(np.concatenate([p[0] for p in prepared]), np.concatenate([p[1] for p in prepared]), device)
+
+
+def _normalization(train: FrameSet) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    inputs = train.inputs.cpu().numpy().astype(np.float64)
+    targets = train.targets.cpu().numpy().astype(np.float64)
+    out_mean = targets.mean(axis=0)
+    return inputs.mean(axis=0), inputs.std(axis=0), out_mean, float(np.sqrt(np.mean((targets - out_mean) ** 2)))
+
+
+@torch.no_grad()
+def _validation_errors(network: Network, examples: FrameSet) -> dict:
+    """Per-sample offset errors over the validation frames, in cm, beside zero offsets."""
+    network.eval()
+    predicted = network(examples.inputs).view(len(examples), -1, 3)
+    truth = examples.targets.view(len(examples), -1, 3)
+    dist = torch.linalg.norm(predicted - truth, dim=2).double()
+    size = torch.linalg.norm(truth, dim=2).double()
+    return {
+        "frames": len(examples),
+        "rms_cm": float(torch.sqrt(torch.mean(dist**2))),
+        "mean_cm": float(torch.mean(dist)),
+        "max_cm": float(torch.max(dist)),
+        "zero_offset_rms_cm": float(torch.sqrt(torch.mean(size**2))),
+    }
