@@ -14,6 +14,7 @@ from facedyn.performance import Performance
 from facedyn.usd.corpus import CORPUS_INDEX, read_corpus_index
 from facedyn.usd.errors import TakeError
 from facedyn.usd.take import TakeSource, read_stage, read_take
+from facedyn.usd.timing import Timing
 
 SKULL_SOURCES = ("take", "truth")
 
@@ -45,6 +46,7 @@ def read_training_take(root: Path, skull: str = "take", frames=None) -> tuple[Pe
         if not truth_skull.is_file():
             raise TakeError(f"{root}: no truth/skull.usdc beside it (only simulated takes have a true skull)")
         layer = Sdf.Layer.CreateAnonymous(".usda")
+        Timing.from_layer(Sdf.Layer.FindOrOpen(str(capture))).apply(layer)  # the in-memory root keeps the take's rate
         layer.subLayerPaths = [str(truth_skull), str(capture)]
         return read_stage(Usd.Stage.Open(layer), truth_skull, frames=frames)
     path = folder / "take.usda" if folder else root

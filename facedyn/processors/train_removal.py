@@ -1,0 +1,78 @@
+"""`usdfacedyn train-removal`: train network F on a corpus and write the model file.
+
+Not a layer processor: its output is a model (weights + JSON metadata, facedyn.dynamics
+.modelfile), the input of the remove processor.
+"""
+from __future__ import annotations
+
+import fnmatch
+import time
+from pathlib import Path
+
+from facedyn.errors import UsageError
+from facedyn.progress import Progress
+
+
+def load_takes(inputs: list[Path], skull: str, include: str | None, exclude: str | None, progress: Progress):
+    """(name, Performance) of every selected take, all of one topology."""
+    from facedyn.usd.errors import TakeError
+    from facedyn.usd.training_data import read_training_take, take_roots
+
+    roots = take_roots(inputs)
+    named = [(_take_name(root), root) for root in roots]
+    if include:
+        named = [(n, r) for n, r in named if fnmatch.fnmatch(n, include)]
+    if exclude:
+        named = [(n, r) for n, r in named if not fnmatch.fnmatch(n, exclude)]
+    if not named:
+        raise UsageError("no take left to train on after --include/--exclude")
+    takes = []
+    progress.start("read takes", len(named))
+    for name, root in named:
+        perf, _ = read_training_take(root, skull)
+        if takes and perf.topology.fingerprint() != takes[0][1].topology.fingerprint():
+            raise TakeError(f"{root}: its mesh topology differs from {takes[0][0]}'s; a model is trained for one topology")
+        takes.append((name, perf))
+        progress.advance()
+    progress.finish()
+    return takes
+
+
+def _take_name(root: Path) -> str:
+    return root.name if root.is_dir() else root.parent.name if root.name in ("take.usda", "truth.usda") else root.stem
+
+
+def train_removal_command(args) -> dict:
+    """Run the training the parsed command line asks for; return a JSON-able report."""
+    from facedyn.dynamics.face import FaceSetup
+    from facedyn.dynamics.modelfile import save_model
+    from facedyn.dynamics.training import Take, TrainConfig, train_removal
+
+    progress = Progress.silent() if args.json else Progress()
+    started = time.perf_counter()
+    takes = load_takes(args.inputs, args.skull, args.include, args.exclude, progress)
+    face = FaceSetup.from_performance(takes[0][1], sample_count=args.samples)
+    validation = tuple(v for v in (args.validation or "").split(",") if v) or None
+    config = TrainConfig(epochs=args.epochs, subsample=args.subsample, validation=validation, seed=args.seed, device=args.device)
+    read_seconds = time.perf_counter() - started
+    progress.start(f"train F ({len(takes)} takes)", config.epochs)
+    curve_tail = {}
+
+    def on_epoch(epoch, train_loss, val_loss):
+        curve_tail.update(epoch=epoch, train=train_loss, val=val_loss)
+        progress.advance()
+
+    model = train_removal([Take.from_performance(perf, name) for name, perf in takes], face, config, on_epoch, backend=args.backend)
+    progress.finish()
+    model.info["training"]["skull"] = args.skull
+    model.info["training"]["inputs"] = [str(p) for p in args.inputs]
+    path = save_model(model, args.output)
+    return {
+        "model": str(path),
+        "takes": len(takes),
+        "samples": int(len(face.samples)),
+        "fps": model.fps,
+        "validation": model.info["validation"],
+        "final_loss": curve_tail,
+        "seconds": {"read": round(read_seconds, 2), "total": round(time.perf_counter() - started, 2)},
+    }
