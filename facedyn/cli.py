@@ -119,6 +119,23 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(handler=_cmd_train_removal)
 
+    p = commands.add_parser("train-synthesis", help="train the synthesis network H on a corpus and write a model file")
+    p.add_argument("inputs", nargs="+", type=Path, metavar="CORPUS", help="corpus folders (corpus.json), take folders or stabilized takes")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="MODEL", help="model file to write (e.g. actor.synthesis)")
+    p.add_argument("--quasistatic", required=True, metavar="MODEL|truth", help="a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes)")
+    p.add_argument("--skull", choices=("take", "truth"), default="take", help="the takes' solved skull, or a simulated corpus's true skull")
+    p.add_argument("--epochs", type=int, default=30, help="training epochs (default: 30, as the paper)")
+    p.add_argument("--samples", type=int, default=344, help="skin samples when the takes define none (with --quasistatic truth)")
+    p.add_argument("--validation", metavar="NAMES", help="comma-separated take names held out for validation (default: the last take)")
+    p.add_argument("--include", metavar="PATTERN", help="only takes whose name matches this glob pattern")
+    p.add_argument("--exclude", metavar="PATTERN", help="leave out takes whose name matches this glob pattern")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="auto", help="torch device: auto, cpu, cuda")
+    p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto", help="stretch and feature kernels")
+    p.add_argument("--json", action="store_true", help="print a JSON report")
+    p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
+    p.set_defaults(handler=_cmd_train_synthesis)
+
     requested = next((a for a in argv if not a.startswith("-")), None)
     for name, entry_point in registry.available().items():
         if name == requested:
@@ -247,11 +264,20 @@ def _cmd_validate(args) -> int:
 def _cmd_train_removal(args) -> int:
     from facedyn.processors.train_removal import train_removal_command
 
-    report = train_removal_command(args)
-    if args.json:
+    return _report_training("train-removal", train_removal_command(args), args.json)
+
+
+def _cmd_train_synthesis(args) -> int:
+    from facedyn.processors.train_synthesis import train_synthesis_command
+
+    return _report_training("train-synthesis", train_synthesis_command(args), args.json)
+
+
+def _report_training(command: str, report: dict, as_json: bool) -> int:
+    if as_json:
         print(json.dumps(report, indent=2, default=str))
     else:
-        print(f"train-removal: wrote {report['model']} ({report['takes']} takes, {report['samples']} samples, {report['seconds']['total']} s)")
+        print(f"{command}: wrote {report['model']} ({report['takes']} takes, {report['samples']} samples, {report['seconds']['total']} s)")
         if report["validation"]:
             v = report["validation"]
             print(f"  validation RMS {v['rms_cm']:.4f} cm (zero-offset baseline {v['zero_offset_rms_cm']:.4f} cm)")

@@ -34,10 +34,22 @@ class TakeSource:
 
 
 def read_take(
-    path: str | os.PathLike, mesh: str | None = None, frames: tuple[float, float] | None = None
+    path: str | os.PathLike,
+    mesh: str | None = None,
+    frames: tuple[float, float] | None = None,
+    mute: frozenset[str] = frozenset(),
 ) -> tuple[Performance, TakeSource]:
-    """Read the face of a take (the mesh with FacedynFaceAPI, or `mesh`) over `frames` (inclusive)."""
-    return read_stage(open_stage(path), Path(path), mesh, frames)
+    """Read the face of a take (the mesh with FacedynFaceAPI, or `mesh`) over `frames` (inclusive).
+
+    `mute` names processors whose layers are muted first, e.g. to read the quasistatic
+    performance under the synthesized variants stacked on it.
+    """
+    stage = open_stage(path)
+    if mute:
+        from facedyn.usd.layerstack import result_layers
+
+        stage.MuteAndUnmuteLayers(result_layers(stage, mute), [])
+    return read_stage(stage, Path(path), mesh, frames)
 
 
 def read_stage(
@@ -58,7 +70,9 @@ def read_stage(
         mesh_path=str(mesh_prim.GetPath()),
         skull_path=str(skull_prim.GetPath()) if skull_prim else None,
         timing=Timing.from_stage(stage),
-        layer_identifiers=tuple(layer.identifier for layer in stage.GetLayerStack(includeSessionLayers=False)),
+        layer_identifiers=tuple(
+            layer.identifier for layer in stage.GetLayerStack(includeSessionLayers=False) if not stage.IsLayerMuted(layer.identifier)
+        ),
     )
     return performance, source
 

@@ -1,0 +1,65 @@
+"""Skull motion sources for synthesize and retarget: mocap, another take, or procedural.
+
+Every source is brought to the target take's frame rate and length: resampled (slerp for
+rotations), never silently misaligned; a source shorter than the take is an error.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from facedyn.errors import UsageError
+from facedyn.sim import motion
+
+PROCEDURAL = ("still", "walk", "run", "hop")
+
+
+def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head", seed: int = 0) -> tuple[np.ndarray, np.ndarray, str]:
+    """(translate (F,3), orient (F,4), description) of `source` at fps over frame_count frames.
+
+    source: a BVH file, a take (.usda/.usdc with a solved skull), or walk | run | hop |
+    still | platform:9hz.
+    """
+    duration = frame_count / fps
+    kind, _, arg = source.partition(":")
+    if source in PROCEDURAL:
+        trajectory = getattr(motion, source)(duration_s=duration, fps=fps, seed=seed)
+        return _fit(trajectory, frame_count, source)
+    if kind == "platform":
+        try:
+            hz = float(arg.lower().removesuffix("hz"))
+        except ValueError:
+            raise UsageError(f"platform motion needs a frequency, e.g. platform:9hz, got {source!r}") from None
+        trajectory = motion.platform(hz, 0.3, duration_s=duration, fps=fps, seed=seed)
+        return _fit(trajectory, frame_count, source)
+    path = Path(source)
+    if not path.exists():
+        raise UsageError(f"skull motion {source!r}: not a file, nor one of {', '.join(PROCEDURAL)}, platform:HZ")
+    if path.suffix.lower() == ".bvh":
+        trajectory = motion.from_bvh(path, joint)
+        if trajectory.fps != fps:
+            trajectory = motion.resample(trajectory, fps)
+        if trajectory.frame_count < frame_count:
+            raise UsageError(f"{path}: {trajectory.frame_count / fps:.2f} s of motion for a {duration:.2f} s take")
+        return _fit(trajectory, frame_count, f"{path.name} joint {joint}")
+    return _from_take(path, fps, frame_count)
+
+
+def _fit(trajectory: motion.SkullTrajectory, frame_count: int, description: str):
+    return trajectory.translate[:frame_count].copy(), trajectory.orient[:frame_count].copy(), description
+
+
+def _from_take(path: Path, fps: float, frame_count: int):
+    from facedyn.usd.errors import TakeError
+    from facedyn.usd.take import read_take
+
+    perf, source = read_take(path)
+    if perf.skull_orient is None:
+        raise TakeError(f"{path}: {source.mesh_path} has no solved skull motion to take (stabilize it first)")
+    trajectory = motion.SkullTrajectory(*perf.skull(), perf.fps)
+    if perf.fps != fps:
+        trajectory = motion.resample(trajectory, fps)
+    if trajectory.frame_count < frame_count:
+        raise TakeError(f"{path}: {trajectory.frame_count} frames of skull motion at {fps:g} fps for a {frame_count}-frame take")
+    return _fit(trajectory, frame_count, f"skull of {path.name}")
