@@ -1,10 +1,10 @@
 """Discrete operators on triangle meshes: cotangent and graph Laplacians, lumped areas.
 
 Every operator is built from whole arrays (one scatter into a sparse matrix, no loop over
-triangles), so an ICT-sized mesh (about 22k triangles) takes milliseconds. Laplacians use
-the positive semidefinite sign, ``(L f)_i = sum_j w_ij (f_i - f_j)``: rows sum to zero and
-``f @ L @ f`` is the (Dirichlet) energy of f, which is what simulators and smoothness
-measures want.
+triangles), so an ICT-sized mesh (about 22k triangles) takes a few tens of milliseconds.
+Laplacians use the positive semidefinite sign, ``(L f)_i = sum_j w_ij (f_i - f_j)``: rows
+sum to zero and ``f @ L @ f`` is the (Dirichlet) energy of f, which is what simulators and
+smoothness measures want.
 """
 from __future__ import annotations
 
@@ -38,11 +38,12 @@ def _check(points: np.ndarray | None, triangles: np.ndarray, n_points: int | Non
 
 def unique_edges(triangles: np.ndarray) -> np.ndarray:
     """(E, 2) undirected edges of the triangles, each once, with ``i < j``, sorted."""
-    _, tri, _ = _check(None, triangles)
+    _, tri, n = _check(None, triangles)
     e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
     e.sort(axis=1)
     e = e[e[:, 0] != e[:, 1]]
-    return np.unique(e, axis=0)
+    key = np.unique(e[:, 0] * n + e[:, 1])  # one integer per edge: a 1-D unique is 5x faster
+    return np.stack([key // n, key % n], axis=1)
 
 
 def corner_cotangents(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -101,6 +102,7 @@ def uniform_laplacian(triangles: np.ndarray, n_points: int | None = None) -> sp.
 
 
 def triangle_areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(T,) area of each triangle."""
     pts, tri, _ = _check(points, triangles)
     p = pts[tri]
     return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=-1)
