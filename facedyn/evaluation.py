@@ -13,15 +13,19 @@ import numpy as np
 from facedyn.geometry import quaternion, rigid
 
 
-def stabilization_errors(solved_skull: np.ndarray, solved_translate: np.ndarray, solved_orient: np.ndarray,
-                         true_skull: np.ndarray, true_translate: np.ndarray, true_orient: np.ndarray,
-                         vertices: np.ndarray | None = None) -> dict:
-    """Vertex (cm), rotation (deg) and translation (cm) errors after one global rigid alignment.
+def stabilization_errors(solved_translate: np.ndarray, solved_orient: np.ndarray, true_translate: np.ndarray,
+                         true_orient: np.ndarray, true_skull: np.ndarray, vertices: np.ndarray | None = None) -> dict:
+    """Vertex (cm), rotation (deg) and translation (cm) errors of solved skull transforms.
 
-    solved/true_skull: (F, N, 3) skull-space points; translate/orient map skull to world.
-    With the alignment G (solved skull space -> true skull space), the solved skull
-    transform corresponds to T_solved G^-1, compared with T_true frame by frame.
+    true_skull: (F, N, 3) the noise-free skin in true skull space (y + u); translate/orient
+    map skull to world. The true world skin is taken into the solved skull space with the
+    solved transforms, so the vertex error measures the transforms alone (not tracking
+    noise); that sequence is aligned to the true one by one global rigid transform G,
+    and the solved skull transform then corresponds to T_solved G^-1, compared with T_true.
     """
+    world = np.einsum("fij,fnj->fni", quaternion.to_matrix(true_orient), true_skull) + true_translate[:, None]
+    r_s = quaternion.to_matrix(solved_orient)
+    solved_skull = np.einsum("fji,fnj->fni", r_s, world - solved_translate[:, None])
     vertices = np.arange(true_skull.shape[1]) if vertices is None else np.asarray(vertices)
     source = solved_skull[:, vertices].reshape(-1, 3).astype(np.float64)
     target = true_skull[:, vertices].reshape(-1, 3).astype(np.float64)

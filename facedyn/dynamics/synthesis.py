@@ -34,6 +34,7 @@ from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec, res
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
+from facedyn.dynamics.targets import moving_average
 from facedyn.dynamics.training import ProgressCallback, Take, TrainConfig, _split, fit
 from facedyn.performance import UVs
 
@@ -128,7 +129,8 @@ def train_synthesis(
         "loss_curve": curve,
     }
     return DynamicsModel(
-        kind="synthesis", network=network, face=face, fps=fps, windows={"skull": config.window}, info=info,
+        kind="synthesis", network=network, face=face, fps=fps,
+        windows={"skull": config.window, "stretch_smoothing": config.target_window}, info=info,
         arrays=stretch_arrays(nb, lengths),
     )
 
@@ -163,6 +165,7 @@ def synthesize_dynamics(
     t, q = check_transforms(translate, orient, f)
     nb, lengths = model_stretch(model)
     y = np.ascontiguousarray(y, dtype=np.float32)
+    shape = expression_shape(y, model.windows.get("stretch_smoothing", 0))
     b = skull_features(t, q, model.face.landmarks, fps, model.windows["skull"])
     propagator = model.propagator()
     network = model.network.to(resolve_device(device)).eval()
@@ -173,12 +176,25 @@ def synthesize_dynamics(
     with torch.inference_mode():
         for a in range(0, f, int(chunk_frames)):
             z = min(f, a + int(chunk_frames))
-            s = stretch_features(y[a:z], nb, lengths, backend)
+            s = stretch_features(shape[a:z], nb, lengths, backend)
             inputs = np.concatenate([b[a:z], s.reshape(z - a, -1)], axis=1)
             d = network(torch.from_numpy(inputs).to(dev)).cpu().numpy().reshape(z - a, samples, 3)
             propagator.apply_into(d, offsets[a:z])
             np.add(y[a:z], offsets[a:z], out=points[a:z])
     return points, offsets
+
+
+def expression_shape(quasistatic: np.ndarray, window: int) -> np.ndarray:
+    """The quasistatic skin averaged over t-w..t+w: what stretch S(t) is measured on.
+
+    Stretch is to tell H the expression. A quasistatic take made by F still holds some
+    of the jiggle F missed, and H trained on its raw stretch learns to read the dynamics
+    back out of it (a leak that vanishes on clean input, so H then predicts nothing); the
+    expression itself changes slowly next to 6-11 Hz jiggle, so the average keeps it.
+    """
+    if window <= 0:
+        return quasistatic
+    return moving_average(quasistatic, window).astype(np.float32)
 
 
 def stretch_arrays(neighbourhoods: UVNeighbourhoods, neutral_lengths: np.ndarray) -> dict[str, np.ndarray]:
@@ -266,7 +282,7 @@ def _prepare(take: Take, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndar
         if y.shape != pts.shape:
             raise ValueError(f"take {take.name!r}: quasistatic shapes are {y.shape}, its points {pts.shape}")
         targets = skull_space(pts[:, face.samples], t, q, take.space) - y[:, face.samples]
-    s = stretch_features(y, nb, lengths, backend)
+    s = stretch_features(expression_shape(y, config.target_window), nb, lengths, backend)
     b = skull_features(t, q, face.landmarks, take.fps, config.window)
     keep = slice(config.trim, f - config.trim)
     inputs = np.concatenate([b, s.reshape(f, -1)], axis=1)[keep]

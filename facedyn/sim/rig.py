@@ -26,7 +26,7 @@ from facedyn.performance import UVs, Topology
 LANDMARK_NAMES = ("eye_corner_left", "eye_corner_right", "eye_inner_left", "eye_inner_right", "nose_tip", "nose_base")
 
 # Width (cm, along the skin) over which rigid weights fall from 1 on the rigid set to 0.
-RIGID_FALLOFF_CM = 1.5
+RIGID_FALLOFF_CM = 3.0
 
 # Above this fraction of non-zeros a dense basis multiplies faster than a sparse one.
 _DENSE_BASIS_FILL = 0.2

@@ -100,7 +100,7 @@ def test_a_still_skull_gets_almost_no_dynamics(trained, corpus):
 def test_model_round_trip_and_refusals(trained, corpus, face, rig, tmp_path):
     path = save_model(trained, tmp_path / "h.fdyn")
     loaded = load_model(path, topology=face.topology, fps=FPS)
-    assert loaded.kind == "synthesis" and loaded.windows == {"skull": 10}
+    assert loaded.kind == "synthesis" and loaded.windows == {"skull": 10, "stretch_smoothing": 10}
     nb, lengths = model_stretch(loaded)
     nb0, lengths0 = model_stretch(trained)
     for name in ("samples", "vertices", "weights", "one_sided", "uv_steps", "charts"):

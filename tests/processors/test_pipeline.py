@@ -55,7 +55,7 @@ def test_stabilize_composes_back_to_the_capture_and_beats_three_point(corpus, ca
         from facedyn.usd.take import read_stage
 
         solved, _ = read_stage(Usd.Stage.Open(stage_layer), take / layer)
-        errors[name] = stabilization_errors(solved.points, *solved.skull(), true_skull, truth.skull_translate, truth.skull_orient)
+        errors[name] = stabilization_errors(*solved.skull(), truth.skull_translate, truth.skull_orient, true_skull)
     assert errors["mode-pursuit"]["median_vertex_cm"] < 0.02
     assert errors["mode-pursuit"]["median_vertex_cm"] < errors["three-point"]["median_vertex_cm"]
 

@@ -197,3 +197,18 @@ def test_from_bvh_windows_and_resamples():
     np.testing.assert_allclose(slow.translate[0], whole.translate[0])
     with pytest.raises(ValueError, match="asked for 60"):
         motion.from_bvh(path, duration_s=60)
+
+
+def test_lowpass_keeps_gait_and_removes_jitter():
+    from facedyn.sim.motion import lowpass
+
+    walking = motion.walk(duration_s=3.0, fps=120.0, seed=1)
+    smoothed = lowpass(walking, 10.0)
+    np.testing.assert_allclose(smoothed.translate[30:-30], walking.translate[30:-30], atol=0.02)
+    rng = np.random.default_rng(0)
+    jittery = motion.SkullTrajectory(walking.translate + rng.normal(scale=0.05, size=walking.translate.shape), walking.orient, 120.0)
+    raw = np.linalg.norm(motion.accelerations(jittery).linear_acceleration_world, axis=1)
+    filtered = np.linalg.norm(motion.accelerations(lowpass(jittery, 10.0)).linear_acceleration_world, axis=1)
+    assert np.percentile(filtered, 95) < 0.3 * np.percentile(raw, 95)
+    with pytest.raises(ValueError, match="cutoff"):
+        lowpass(walking, 80.0)
