@@ -30,7 +30,7 @@ SCALES = {
 }
 
 
-NOISE_CM = 0.01  # tracking noise of the new performance (per coordinate)
+NOISE_CM = 0.01  # tracking noise of every simulated take, cm per coordinate (a good marker-less capture)
 
 
 class Demo:
@@ -59,7 +59,7 @@ class Demo:
         self.output.mkdir(parents=True, exist_ok=True)
         rig = self.step("load rig", lambda: _load_rig(self.rig_path, None))
         corpus = self.output / "corpus"
-        specs = protocol(rig, self.settings["corpus"], self.data, seed=0)
+        specs = protocol(rig, self.settings["corpus"], self.data, seed=0, noise_cm=NOISE_CM)
         self.step(f"simulate corpus ({len(specs)} takes)", lambda: build_corpus(corpus, rig, specs, progress=self.progress))
         spec = TakeSpec("performance", "walk", "smile", duration_s=self.settings["seconds"], seed=777, noise_cm=NOISE_CM)
         take_dir = self.output / "take"
