@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 LOSSES = ("geman-mcclure", "huber", "trim")
+MEDIAN_SAMPLES = 256  # residuals per frame that the robust scale (MAD) is taken from
 
 
 def _pair(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -47,23 +48,50 @@ def kabsch(source: np.ndarray, target: np.ndarray, weights: np.ndarray | None = 
     """
     source, target = _pair(source, target)
     batch = np.broadcast_shapes(source.shape[:-2], target.shape[:-2])
-    w = _point_weights(weights, batch, source.shape[-2])
+    return _kabsch(source, target, _point_weights(weights, batch, source.shape[-2]))
+
+
+def _kabsch(source: np.ndarray, target: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Kabsch on (..., N, 3) arrays in float64."""
     wsum = w.sum(axis=-1, keepdims=True)
-    cs = np.einsum("...n,...ni->...i", w, source) / wsum
-    ct = np.einsum("...n,...ni->...i", w, target) / wsum
-    # H = sum w (s - cs)(x - ct)^T, expanded so that no centred copies are made
-    h = np.einsum("...n,...ni,...nj->...ij", w, source, target) - wsum[..., None] * cs[..., :, None] * ct[..., None, :]
-    u, _, vt = np.linalg.svd(h)
-    d = np.sign(np.linalg.det(np.swapaxes(vt, -1, -2) @ np.swapaxes(u, -1, -2)))
-    d = np.where(d == 0, 1.0, d)
-    fix = np.ones(batch + (3,))
-    fix[..., 2] = d
-    rot = np.swapaxes(vt, -1, -2) @ (fix[..., :, None] * np.swapaxes(u, -1, -2))
-    trans = ct - np.einsum("...ij,...j->...i", rot, cs)
-    return rot, trans
+    cs = np.matmul(w[..., None, :], source)[..., 0, :] / wsum
+    ct = np.matmul(w[..., None, :], target)[..., 0, :] / wsum
+    h = np.matmul(np.swapaxes(source * w[..., None], -1, -2), target)
+    rot = _rotation(h - wsum[..., None] * cs[..., :, None] * ct[..., None, :])
+    return rot, ct - np.matmul(rot, cs[..., None])[..., 0]
+
+
+def _kabsch_columns(src: np.ndarray, tgt: np.ndarray, tgt_columns: np.ndarray, w: np.ndarray):
+    """Kabsch on centred float32 data, source as columns (..., 3, N) (one GEMM per frame);
+    the target comes in both layouts, (..., N, 3) and (..., 3, N)."""
+    wsum = w.sum(axis=-1)
+    cs = np.matmul(src, w[..., :, None])[..., 0] / wsum[..., None]
+    ct = np.matmul(tgt_columns, w[..., :, None])[..., 0] / wsum[..., None]
+    h = np.matmul(src * w[..., None, :], tgt) - wsum[..., None, None] * cs[..., :, None] * ct[..., None, :]
+    rot = _rotation(h)
+    return rot, ct - np.matmul(rot, cs[..., None].astype(np.float64))[..., 0]
+
+
+def _rotation(h: np.ndarray) -> np.ndarray:
+    """The proper rotation maximizing tr(R H) for cross-covariances H (..., 3, 3)."""
+    u, _, vt = np.linalg.svd(h.astype(np.float64))
+    v, ut = np.swapaxes(vt, -1, -2), np.swapaxes(u, -1, -2)
+    fix = np.ones(h.shape[:-1])
+    fix[..., 2] = np.where(np.linalg.det(v @ ut) < 0, -1.0, 1.0)
+    return v @ (fix[..., :, None] * ut)
+
+
+def apply(rot: np.ndarray, trans: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """R @ p + t for point sets (..., N, 3) and transforms (..., 3, 3), (..., 3)."""
+    return np.matmul(points, np.swapaxes(rot, -1, -2)) + trans[..., None, :]
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Median along the last axis, weighted; a plain (faster) median when weights are a
+    0/1 mask shared by all leading indices."""
+    mask = weights.reshape(-1, weights.shape[-1])[0]
+    if np.all((mask == 0) | (mask == 1)) and np.all(weights == mask):
+        return np.median(values[..., mask > 0], axis=-1)
     order = np.argsort(values, axis=-1)
     v = np.take_along_axis(values, order, axis=-1)
     cw = np.cumsum(np.take_along_axis(weights, order, axis=-1), axis=-1)
@@ -88,7 +116,8 @@ def robust_icp(
     - ``huber``: weight min(1, 1.345 s / r);
     - ``trim``: weight 1 for the ``trim`` fraction of smallest residuals, else 0.
     ``scale`` s (length units) defaults to 1.4826 x the weighted median residual of each
-    frame (MAD), recomputed every iteration, never below 1e-9 of the target's extent.
+    frame (MAD, from about MEDIAN_SAMPLES evenly strided points), recomputed every
+    iteration, never below 1e-9 of the target's extent.
     Returns R (..., 3, 3), t (..., 3) and the final robust weights (..., N) (without the
     given prior weights, which multiply them).
     """
@@ -101,23 +130,36 @@ def robust_icp(
     source, target = _pair(source, target)
     batch = np.broadcast_shapes(source.shape[:-2], target.shape[:-2])
     prior = _point_weights(weights, batch, source.shape[-2])
-    floor = 1e-9 * max(float(np.ptp(target)), 1e-300)
-    robust = np.ones(batch + (source.shape[-2],))
-    rot, trans = kabsch(source, target, prior)
+    # reweight in float32 on centred, coordinate-major copies (fast GEMMs, half the
+    # memory traffic, no cancellation), then fit once more in float64
+    src = np.ascontiguousarray(np.swapaxes(source - source.mean(axis=-2, keepdims=True), -1, -2), dtype=np.float32)
+    tgt = (target - target.mean(axis=-2, keepdims=True)).astype(np.float32)
+    tgt_columns = np.ascontiguousarray(np.swapaxes(tgt, -1, -2))
+    floor = 1e-9 * max(float(np.ptp(tgt)), 1e-30)
+    prior32 = prior.astype(np.float32)
+    stride = max(1, source.shape[-2] // MEDIAN_SAMPLES)
+    robust = np.ones(batch + (source.shape[-2],), dtype=np.float32)
+    rot, trans = _kabsch_columns(src, tgt, tgt_columns, prior32)
     for _ in range(iterations):
-        resid = np.linalg.norm(np.einsum("...ij,...nj->...ni", rot, source) + trans[..., None, :] - target, axis=-1)
+        d = np.matmul(rot.astype(np.float32), src) + trans.astype(np.float32)[..., :, None] - tgt_columns
+        r2 = np.einsum("...cn,...cn->...n", d, d)
         if loss == "trim":
-            keep = max(1, int(round(trim * resid.shape[-1])))
-            cut = np.partition(np.where(prior > 0, resid, np.inf), keep - 1, axis=-1)[..., keep - 1 : keep]
-            robust = (resid <= cut).astype(np.float64)
+            keep = max(1, int(round(trim * r2.shape[-1])))
+            cut = np.partition(np.where(prior > 0, r2, np.inf), keep - 1, axis=-1)[..., keep - 1 : keep]
+            robust = (r2 <= cut).astype(np.float32)
         else:
-            s = np.full(batch, float(scale)) if scale is not None else 1.4826 * _weighted_median(resid, prior)
-            s = np.maximum(s, floor)[..., None]
-            if loss == "geman-mcclure":
-                robust = (s * s / (resid * resid + s * s)) ** 2
+            if scale is None:
+                s = 1.4826 * np.sqrt(_weighted_median(r2[..., ::stride], prior[..., ::stride]))
             else:
-                robust = np.minimum(1.0, 1.345 * s / np.maximum(resid, 1e-300))
-        rot, trans = kabsch(source, target, prior * robust)
+                s = np.full(batch, float(scale))
+            s2 = (np.maximum(s, floor) ** 2)[..., None].astype(np.float32)
+            if loss == "geman-mcclure":
+                robust = (s2 / (r2 + s2)) ** 2
+            else:
+                robust = np.minimum(1.0, 1.345 * np.sqrt(s2 / np.maximum(r2, 1e-30))).astype(np.float32)
+        rot, trans = _kabsch_columns(src, tgt, tgt_columns, prior32 * robust)
+    robust = robust.astype(np.float64)
+    rot, trans = _kabsch(source, target, prior * robust)  # the final fit in float64
     return rot, trans, robust
 
 
@@ -156,5 +198,5 @@ def three_point(source: np.ndarray, target: np.ndarray, indices) -> tuple[np.nda
     fs, os_ = three_point_frame(source[..., idx, :])
     ft, ot = three_point_frame(target[..., idx, :])
     rot = ft @ np.swapaxes(fs, -1, -2)
-    trans = ot - np.einsum("...ij,...j->...i", rot, os_)
+    trans = ot - np.matmul(rot, os_[..., None])[..., 0]
     return rot, trans

@@ -75,21 +75,23 @@ def transform_points_vjp(dq: np.ndarray, points: np.ndarray, grad_points: np.nda
     return dualquat.rotation_translation_vjp(dq, g_rot, g_trans)
 
 
-def fit_controls(basis, dq: np.ndarray, smoothing: float = 1e-6) -> np.ndarray:
+def fit_controls(basis, dq: np.ndarray, smoothing: float = 1e-8) -> np.ndarray:
     """Least-squares controls whose blend reproduces per-frame dual quaternions dq.
 
     dq is sign-made-continuous first; the fit is linear, so the blend equals dq up to the
-    renormalization SDLB applies. A small second-difference penalty on the controls keeps
-    the fit well posed where few frames fall under a control's support.
+    renormalization SDLB applies. A tiny second-difference penalty on the controls
+    (``smoothing`` relative to the basis's Gram matrix) keeps the fit well posed where
+    few frames fall under a control's support.
     """
     dq = dualquat.make_continuous(np.asarray(dq, dtype=np.float64))
     if dq.ndim != 2 or dq.shape[0] != basis.shape[0]:
         raise ValueError(f"{dq.shape} dual quaternions for a basis of {basis.shape[0]} frames")
     b = sp.csr_matrix(basis)
     n = b.shape[1]
-    normal = b.T @ b
+    normal = (b.T @ b).tocsr()
+    penalty = sp.identity(n)
     if n >= 3:
         second = sp.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(n - 2, n))
-        normal = normal + smoothing * (second.T @ second)
-    normal = normal + 1e-12 * sp.identity(n)
+        penalty = second.T @ second + 1e-6 * penalty
+    normal = normal + smoothing * normal.diagonal().mean() * penalty
     return np.asarray(spla.spsolve(normal.tocsc(), np.asarray(b.T @ dq))).reshape(-1, 8)

@@ -41,5 +41,7 @@ def derivative_operator(frames: int, fps: float, dtype=np.float64) -> sp.csr_mat
     vals = table[f - start]
     cols = start[:, None] + np.arange(width)[None, :]
     rows = np.repeat(f, width)
+    vals[np.abs(vals) < 1e-9 * fps] = 0.0  # the central weight: exactly zero, keep it out of the matrix
     matrix = sp.csr_matrix((vals.ravel(), (rows, cols.ravel())), shape=(frames, frames))
+    matrix.eliminate_zeros()
     return matrix.astype(dtype)

@@ -1,0 +1,196 @@
+"""stabilize(): one entry point for mode pursuit and the per-frame baselines.
+
+Input is the tracked mesh in world space (F, N, 3); output is the skull transform per
+frame in facedyn's convention (skull -> world: world = R(orient) skull + translate),
+the stabilized (skull-space) points, the rest mesh, a per-frame solve error, and, for
+mode pursuit, the energy per stage and timings.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from facedyn.geometry import dualquat, quaternion, rigid
+from facedyn.stabilize import baselines
+from facedyn.stabilize import rest as rest_estimate
+from facedyn.stabilize.fast import FastSolver
+from facedyn.stabilize.modepursuit import StageRecord, mode_pursuit
+from facedyn.stabilize.schedule import Schedule
+
+METHODS = ("three-point", "procrustes", "icp", "mode-pursuit")
+SOLVERS = ("fast", "reference")
+INIT_ICP_ITERATIONS = 5
+
+
+@dataclass
+class StabilizeResult:
+    translate: np.ndarray  # (F, 3) skull -> world
+    orient: np.ndarray  # (F, 4) wxyz, skull -> world
+    skull_points: np.ndarray  # (F, N, 3) float32, T(t)^-1 world
+    rest: np.ndarray  # (N, 3) rest mesh in skull space
+    solve_error: np.ndarray  # (F,) float32: median distance (cm) of active vertices to rest
+    method: str
+    solver: str | None = None
+    backend: str | None = None  # the fast solver's energy backend: "numpy" or "opencl"
+    energy: float | None = None  # mode pursuit: final energy at the last widths
+    history: list[StageRecord] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def _check_inputs(world, fps, rest, weights):
+    world = np.asarray(world)
+    if world.ndim != 3 or world.shape[2] != 3:
+        raise ValueError(f"world_points must be (frames, N, 3), got {world.shape}")
+    if world.shape[0] < 1 or world.shape[1] < 3:
+        raise ValueError(f"need at least 1 frame and 3 points, got {world.shape}")
+    if not np.issubdtype(world.dtype, np.floating):
+        world = world.astype(np.float64)
+    if not all(np.isfinite(world[f : f + 4096]).all() for f in range(0, len(world), 4096)):
+        raise ValueError("world_points contain NaN or infinite values")
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be a positive number, got {fps}")
+    n = world.shape[1]
+    if rest is not None:
+        rest = np.asarray(rest, dtype=np.float64)
+        if rest.shape != (n, 3):
+            raise ValueError(f"rest must be ({n}, 3) like one frame of world_points, got {rest.shape}")
+    if weights is not None:
+        weights = np.asarray(weights, dtype=np.float64)
+        if weights.shape != (n,):
+            raise ValueError(f"weights must be ({n},), one per vertex, got {weights.shape}")
+        if np.any(weights < 0) or not np.all(np.isfinite(weights)):
+            raise ValueError("weights must be finite and non-negative")
+        if np.count_nonzero(weights) < 3:
+            raise ValueError("at least 3 vertices need a positive weight")
+    return world, rest, weights
+
+
+def stabilize(
+    world_points: np.ndarray,
+    fps: float,
+    method: str = "mode-pursuit",
+    solver: str = "fast",
+    rest: np.ndarray | None = None,
+    weights: np.ndarray | None = None,
+    *,
+    init: str = "icp",
+    three_point: tuple[int, int, int] | None = None,
+    schedule: Schedule | None = None,
+    backend: str = "auto",
+    chunk_frames: int = 4096,
+    chunk_overlap: int = 128,
+    reference_frame: int = 0,
+) -> StabilizeResult:
+    """Solve the rigid skull motion of a tracked face mesh.
+
+    world_points: (F, N, 3) in world space (cm); fps: capture rate.
+    method: "mode-pursuit" (papers/001) or a per-frame baseline "three-point",
+    "procrustes", "icp" (robust, Geman-McClure).
+    solver: mode pursuit's "fast" (analytic gradients, float32, fixed-iteration L-BFGS;
+    backend "opencl", "numpy" or "auto": OpenCL where a device builds the kernels) or
+    "reference" (PyTorch autograd + torch.optim.LBFGS, the paper's formulation).
+    rest: (N, 3) rest mesh in skull space; None estimates it from the data (per-vertex
+    median of the initially aligned frames, moved to the nearest mode at the finest
+    width, facedyn.stabilize.rest), in the skull space of frame ``reference_frame``.
+    weights: (N,) per-vertex weights (0 excludes a vertex, e.g. a rigid-region mask).
+    init: mode pursuit's initialization: "identity", "three-point", "procrustes", "icp".
+    three_point: vertex indices for three-point alignment (method or init).
+    schedule: widths, iterations per stage, spline levels (facedyn.stabilize.schedule).
+    chunk_frames, chunk_overlap: takes longer than chunk_frames are solved in
+    overlapping chunks with bounded memory, blended in the overlaps.
+    """
+    t_total = time.perf_counter()
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    if init not in baselines.METHODS:
+        raise ValueError(f"init must be one of {baselines.METHODS}, got {init!r}")
+    world, rest, weights = _check_inputs(world_points, fps, rest, weights)
+    frames, n, _ = world.shape
+    if not -frames <= reference_frame < frames:
+        raise ValueError(f"reference_frame {reference_frame} out of range for {frames} frames")
+    schedule = schedule if schedule is not None else Schedule()
+    active = np.arange(n) if weights is None else np.flatnonzero(weights > 0)
+    target = rest if rest is not None else world[reference_frame].astype(np.float64)
+    timings: dict[str, float] = {}
+
+    t0 = time.perf_counter()
+    if method == "mode-pursuit":
+        # an initialization only: the spline fit and the first (widest) stage absorb what
+        # further reweighting would refine
+        iterations = INIT_ICP_ITERATIONS
+        rot, trans = baselines.align_frames(world, target, init, weights, three_point, icp_iterations=iterations)
+    else:
+        rot, trans = baselines.align_frames(world, target, method, weights, three_point)
+    timings["init"] = time.perf_counter() - t0
+    if method != "mode-pursuit":
+        world_to_skull = dualquat.from_translate_orient(trans, quaternion.from_matrix(rot))
+        result = _finish(world, world_to_skull, target, active, method, None, timings)
+        result.timings["total"] = time.perf_counter() - t_total
+        return result
+
+    if rest is None:
+        t0 = time.perf_counter()
+        rest = _estimate_rest(world, rot, trans, schedule.widths_pos[-1])
+        timings["init"] += time.perf_counter() - t0
+    if solver == "fast":
+        stage_solver = FastSolver(backend)
+    else:
+        from facedyn.stabilize.reference import ReferenceSolver  # PyTorch: imported only when asked for
+
+        stage_solver = ReferenceSolver()
+    uniform = weights is None or np.all(weights[active] == 1.0)
+    out = mode_pursuit(
+        world,
+        fps,
+        active,
+        None if uniform else weights[active],
+        rest[active],
+        rot,
+        trans,
+        schedule,
+        stage_solver,
+        chunk_frames,
+        chunk_overlap,
+    )
+    timings.update(out.timings)
+    result = _finish(world, out.world_to_skull, rest, active, method, solver, timings)
+    result.energy = out.energy
+    result.backend = getattr(stage_solver, "used_backend", None)
+    result.history = out.history
+    result.timings["total"] = time.perf_counter() - t_total
+    return result
+
+
+def _estimate_rest(world: np.ndarray, rot: np.ndarray, trans: np.ndarray, width: float, block: int = 512) -> np.ndarray:
+    """The rest mesh from initially aligned frames (sampled), a block of vertices at a time."""
+    sample = rest_estimate.sample_frames(len(world))
+    rest = np.empty(world.shape[1:])
+    for v in range(0, world.shape[1], block):
+        aligned = rigid.apply(rot[sample], trans[sample], world[sample, v : v + block].astype(np.float64))
+        rest[v : v + block] = rest_estimate.estimate_rest(aligned, width)
+    return rest
+
+
+def _finish(world, world_to_skull, rest, active, method, solver, timings) -> StabilizeResult:
+    """Skull transforms, skull-space points, rest and per-frame error from world-to-skull maps."""
+    t0 = time.perf_counter()
+    frames, n, _ = world.shape
+    rot, trans = dualquat.to_rotation_translation(world_to_skull)
+    skull = np.empty((frames, n, 3), dtype=np.float32)
+    for start in range(0, frames, 1024):
+        sl = slice(start, start + 1024)
+        skull[sl] = rigid.apply(rot[sl], trans[sl], world[sl].astype(np.float64))
+    error = np.empty(frames, dtype=np.float32)
+    for start in range(0, frames, 1024):
+        sl = slice(start, start + 1024)
+        d = skull[sl][:, active] - rest[active].astype(np.float32)
+        error[sl] = np.sqrt(np.median(np.einsum("fni,fni->fn", d, d), axis=1))
+    skull_to_world = dualquat.conjugate(world_to_skull)
+    translate, orient = dualquat.to_translate_orient(skull_to_world)
+    timings["output"] = time.perf_counter() - t0
+    rest = np.asarray(rest, dtype=np.float64)
+    return StabilizeResult(translate, orient, skull, rest, error, method, solver, timings=timings)

@@ -1,0 +1,41 @@
+"""Overlapping frame chunks for long takes, and the weights that blend their overlaps.
+
+Mode pursuit's cost and memory grow with frames x vertices; a 100,000-frame take is
+solved as overlapping chunks, each with its own spline. In an overlap the two solutions
+are blended with a linear ramp (dual-quaternion blending, so the result stays rigid).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def chunk_ranges(frames: int, chunk_frames: int, overlap: int) -> list[tuple[int, int]]:
+    """Equal chunks [start, stop) covering 0..frames, consecutive ones sharing >= overlap frames."""
+    if frames < 1:
+        raise ValueError(f"need at least one frame, got {frames}")
+    if overlap < 0 or chunk_frames < 4 * max(overlap, 1):
+        raise ValueError(f"chunk_frames ({chunk_frames}) must be at least 4 x overlap ({overlap}) and overlap >= 0")
+    if frames <= chunk_frames:
+        return [(0, frames)]
+    count = math.ceil((frames - overlap) / (chunk_frames - overlap))
+    starts = np.round(np.linspace(0, frames - chunk_frames, count)).astype(int)
+    return [(int(s), int(s) + chunk_frames) for s in starts]
+
+
+def blend_weights(ranges: list[tuple[int, int]], ramp: int) -> list[np.ndarray]:
+    """Per chunk, the weight of each of its frames; all chunks' weights sum to 1 per frame.
+
+    Each hand-over is a linear ramp of ``ramp`` frames centred on the middle of the shared
+    frames (0: a hard switch), so that neither chunk's ends, where its spline and
+    velocity stencils are one-sided, carry weight.
+    """
+    weights = [np.ones(stop - start) for start, stop in ranges]
+    for k in range(len(ranges) - 1):
+        mid = 0.5 * (ranges[k + 1][0] + ranges[k][1])  # the middle of the shared frames
+        for j, side in ((k, -1.0), (k + 1, 1.0)):
+            frames = np.arange(*ranges[j]) + 0.5
+            t = np.clip((frames - mid) / max(ramp, 1e-9) + 0.5, 0.0, 1.0)
+            weights[j] *= t if side > 0 else 1.0 - t
+    return weights
