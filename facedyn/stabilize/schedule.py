@@ -29,16 +29,17 @@ class Schedule:
     The finest spline has knots every ``knot_spacing`` seconds; it is reached after
     ``refinements`` midpoint refinements, done before stages 1..refinements (each halves
     the spacing), so the first stage runs on a 2^refinements times coarser spline. The
-    spacing is the smoothness prior: 1/40 s is smooth against facial motion (a mouth
-    opens in ~1/30 s) yet follows skull vibration up to about 10 Hz (the project's
-    platform corpus runs at 6-11 Hz).
+    spacing is the smoothness prior: 1/80 s still smooths over single-frame tracking
+    noise at 96-128 fps, and follows both 6-11 Hz platform vibration and fast head turns
+    (real CMU walking turns the head at up to ~300 deg/s; 1/40 s left up to 1.4 deg of
+    error there, 1/80 s about 0.04 deg: benchmarks/bench_stabilize_accuracy.py).
     """
 
     widths_pos: tuple[float, ...] = (0.8, 0.4, 0.2, 0.1, 0.05)
     widths_vel: tuple[float, ...] = (0.2, 0.1, 0.05, 0.025, 0.0125)
     reference_fps: float = REFERENCE_FPS
     iterations: int = 12
-    knot_spacing: float = 1.0 / 40.0
+    knot_spacing: float = 1.0 / 80.0
     refinements: int = 2
 
     def __post_init__(self) -> None:
