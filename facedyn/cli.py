@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import traceback
 from pathlib import Path
@@ -98,6 +99,7 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--noise", type=float, default=0.0, metavar="CM", help="Gaussian tracking noise on the captured points")
     p.add_argument("--seed", type=int, default=0, help="seed of the protocol's random choices")
     p.add_argument("--only", metavar="PATTERN", help="only takes whose name matches this glob pattern")
+    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="takes simulated at once (default: one per core)")
     p.add_argument("--json", action="store_true", help="print the corpus index as JSON")
     p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(handler=_cmd_synth)
@@ -316,12 +318,13 @@ def _cmd_synth(args) -> int:
         if not specs:
             raise UsageError(f"no take of the {args.scale} protocol matches {args.only!r}")
     description = {"scale": args.scale, "rig": str(args.rig or "built-in"), "actor_seed": args.actor_seed, "noise_cm": args.noise, "seed": args.seed}
-    index = build_corpus(args.output, rig, specs, progress=Progress.silent() if args.json else Progress(), description=description)
+    index = build_corpus(args.output, rig, specs, progress=Progress.silent() if args.json else Progress(), description=description,
+                         jobs=max(1, args.jobs))
     if args.json:
         print(json.dumps(index, indent=2))
     else:
         print(f"synth: wrote {len(index['takes'])} takes ({index['frames']} frames of {index['points']} points) to {args.output}")
-        print(f"  simulated {index['simulated_frames_per_second']} frames/s; {index['seconds']['total']} s in all")
+        print(f"  {index['simulated_frames_per_second']} frames/s simulated and written ({args.jobs} jobs); {index['seconds']['total']} s in all")
     return EXIT_OK
 
 

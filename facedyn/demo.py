@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from pathlib import Path
 
@@ -60,7 +61,7 @@ class Demo:
         rig = self.step("load rig", lambda: _load_rig(self.rig_path, None))
         corpus = self.output / "corpus"
         specs = protocol(rig, self.settings["corpus"], self.data, seed=0, noise_cm=NOISE_CM)
-        self.step(f"simulate corpus ({len(specs)} takes)", lambda: build_corpus(corpus, rig, specs, progress=self.progress))
+        self.step(f"simulate corpus ({len(specs)} takes)", lambda: build_corpus(corpus, rig, specs, progress=self.progress, jobs=os.cpu_count() or 1))
         spec = TakeSpec("performance", "walk", "smile", duration_s=self.settings["seconds"], seed=777, noise_cm=NOISE_CM)
         take_dir = self.output / "take"
         truth = self.step("simulate a new performance", lambda: simulate_take(rig, spec))

@@ -147,6 +147,37 @@ def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | None = No
     )
 
 
+_worker_setup: tuple = ()
+
+
+def _init_worker(rig: FaceRig, tissue: TissueParams | None) -> None:
+    global _worker_setup
+    _worker_setup = (rig, tissue)
+
+
+def _simulate_in_worker(spec: TakeSpec) -> SimulatedTake:
+    rig, tissue = _worker_setup
+    return simulate_take(rig, spec, tissue)
+
+
+def simulate_takes(rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | None = None, jobs: int = 1):
+    """Simulated takes in the order of `specs`, `jobs` at a time in worker processes.
+
+    One simulation is a sequential time loop on one core (single-threaded BLAS), so a
+    corpus uses every core by simulating several takes at once.
+    """
+    if jobs <= 1 or len(specs) <= 1:
+        for spec in specs:
+            yield simulate_take(rig, spec, tissue)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    context = multiprocessing.get_context("spawn")  # no fork of a process holding threads
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=_init_worker, initargs=(rig, tissue)) as pool:
+        yield from pool.map(_simulate_in_worker, specs)
+
+
 def held_expressions(rig: FaceRig, count: int = 10) -> list[str]:
     """The first `count` HELD_EXPRESSIONS whose shapes the rig has (all of them)."""
     names = set(rig.expression_names)
