@@ -27,7 +27,7 @@ from facedyn.progress import Progress
 SCALES = {
     # corpus scale, performance length (s), F epochs and subsample, H epochs
     "demo": {"corpus": "demo", "seconds": 3.0, "f_epochs": 8, "f_subsample": 0.5, "h_epochs": 20},
-    "standard": {"corpus": "standard", "seconds": 6.0, "f_epochs": 60, "f_subsample": 0.25, "h_epochs": 30},
+    "standard": {"corpus": "standard", "seconds": 6.0, "f_epochs": 20, "f_subsample": 0.25, "h_epochs": 30},
 }
 
 
@@ -61,7 +61,12 @@ class Demo:
         rig = self.step("load rig", lambda: _load_rig(self.rig_path, None))
         corpus = self.output / "corpus"
         specs = protocol(rig, self.settings["corpus"], self.data, seed=0, noise_cm=NOISE_CM)
-        self.step(f"simulate corpus ({len(specs)} takes)", lambda: build_corpus(corpus, rig, specs, progress=self.progress, jobs=os.cpu_count() or 1))
+        description = {"scale": self.scale, "rig": rig.name, "points": rig.point_count, "takes": [s.name for s in specs], "noise_cm": NOISE_CM}
+        if _existing_corpus(corpus) == description:
+            print(f"[demo] reusing the corpus in {corpus} (same rig, protocol and noise)")
+        else:
+            self.step(f"simulate corpus ({len(specs)} takes)", lambda: build_corpus(
+                corpus, rig, specs, progress=self.progress, description=description, jobs=os.cpu_count() or 1))
         spec = TakeSpec("performance", "walk", "smile", duration_s=self.settings["seconds"], seed=777, noise_cm=NOISE_CM)
         take_dir = self.output / "take"
         truth = self.step("simulate a new performance", lambda: simulate_take(rig, spec))
@@ -177,6 +182,12 @@ class Demo:
     def summary(self, root: Path) -> dict:
         return {"take": str(root), "scale": self.scale, "results": self.results, "timings_s": self.timings,
                 "total_s": round(sum(self.timings.values()), 1)}
+
+
+def _existing_corpus(folder: Path) -> dict | None:
+    """The description of a corpus an earlier demo run left in `folder`, if any."""
+    index = folder / "corpus.json"
+    return json.loads(index.read_text()).get("description") if index.is_file() else None
 
 
 def _compose(*layers: Path):

@@ -213,11 +213,19 @@ def _split(takes: list[Take], validation: Sequence[str] | None) -> set[str]:
     return held
 
 
-def _normalization(train: PairSet) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def _normalization(train: PairSet, max_pairs: int = 1_000_000, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Feature and target statistics from up to `max_pairs` random training pairs.
+
+    A large corpus holds tens of millions of pairs; their statistics are settled long
+    before that, and a float64 copy of all of them would not fit in memory.
+    """
     frames = train.frames.cpu().numpy()
-    skull = train.skull.cpu().numpy()[frames].astype(np.float64)
-    skin = train.skin.cpu().numpy()[frames].reshape(-1, train.skin.shape[2]).astype(np.float64)
-    targets = train.targets.cpu().numpy()[frames].reshape(-1, 3).astype(np.float64)
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(train), size=min(len(train), max_pairs), replace=False)
+    f, s = frames[pick // train.samples], pick % train.samples
+    skull = train.skull.cpu().numpy()[np.unique(frames)].astype(np.float64)
+    skin = train.skin.cpu().numpy()[f, s].astype(np.float64)
+    targets = train.targets.cpu().numpy()[f, s].astype(np.float64)
     mean = np.concatenate([skull.mean(axis=0), skin.mean(axis=0)])
     std = np.concatenate([skull.std(axis=0), skin.std(axis=0)])
     out_mean = targets.mean(axis=0)
@@ -250,6 +258,7 @@ def train_removal(
     prepared = {t.name: _prepare(t, face, config, backend) for t in takes}
     train = _pairs([prepared[t.name] for t in takes if t.name not in held], device)
     val = _pairs([prepared[t.name] for t in takes if t.name in held], device)
+    del prepared  # the pair sets hold their own copies; a large corpus cannot afford both
 
     skull_dims, skin_dims = train.skull.shape[1], train.skin.shape[2]
     spec: NetworkSpec = removal_spec(skull_dims, skin_dims)
