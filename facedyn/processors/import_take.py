@@ -6,6 +6,7 @@ root beside it lists it as its base sublayer, ready for stabilize and the others
 """
 from __future__ import annotations
 
+import glob
 import re
 from pathlib import Path
 
@@ -54,6 +55,10 @@ class _Source:
 
 def _source(request: Request) -> _Source:
     paths = list(request.inputs)
+    if len(paths) == 1 and not paths[0].exists() and glob.has_magic(str(paths[0])):  # a quoted pattern
+        paths = [Path(p) for p in glob.glob(str(paths[0]))]
+        if not paths:
+            raise UsageError(f"{request.inputs[0]}: the pattern matches no file")
     if len(paths) == 1 and paths[0].is_dir():
         paths = sorted(paths[0].glob("*.obj"))
         if not paths:

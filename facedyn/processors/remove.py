@@ -61,7 +61,8 @@ def _inputs(request: Request):
         raise UsageError("remove takes one TAKE")
     if not request.params["model"]:
         raise UsageError("remove needs --model MODEL (a file written by usdfacedyn train-removal)")
-    perf, source = read_take(request.inputs[0], frames=request.frames)
+    # Read the stabilized take, under any earlier removal and the variants stacked on it.
+    perf, source = read_take(request.inputs[0], frames=request.frames, mute=frozenset({"remove", "synthesize", "retarget", "preview"}))
     if source.skull_path is None or perf.skull_orient is None or perf.role == "captured":
         raise TakeError(f"{request.inputs[0]}: {source.mesh_path} is not stabilized; run `usdfacedyn stabilize` first")
     model = load_model(request.params["model"], topology=perf.topology, fps=perf.fps)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pxr import Sdf, Usd, UsdGeom
+from pxr import Sdf
 
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layers import PERFORMANCE_PATH, export_atomically, relative_asset_path, write_take_root
@@ -30,15 +30,20 @@ def write_variant_shot(shot: Path, versions: dict[str, list[Path]], prim: str = 
     roots = {name: write_take_root(shot.with_name(f"{shot.stem}.{name}.usda"), layers, timing) for name, layers in versions.items()}
     layer = Sdf.Layer.CreateAnonymous(".usda")
     timing.apply(layer)
-    stage = Usd.Stage.Open(layer)
-    actor = UsdGeom.Xform.Define(stage, prim).GetPrim()
-    stage.SetDefaultPrim(stage.GetPrimAtPath(Sdf.Path(prim).GetPrefixes()[0]))
-    variants = actor.GetVariantSets().AddVariantSet(variant_set)
+    # Authored as specs, not through a stage: nothing is composed (or resolved) until the
+    # shot is opened from its own folder, where the relative references point.
+    path = Sdf.Path(prim)
+    for prefix in path.GetPrefixes():
+        spec = Sdf.CreatePrimInLayer(layer, prefix)
+        spec.specifier = Sdf.SpecifierDef
+        spec.typeName = "Xform"
+    actor = layer.GetPrimAtPath(path)
+    variants = Sdf.VariantSetSpec(actor, variant_set)
     for name, root in roots.items():
-        variants.AddVariant(name)
-        variants.SetVariantSelection(name)
-        with variants.GetVariantEditContext():
-            actor.GetReferences().AddReference(relative_asset_path(root, shot.parent), Sdf.Path(PERFORMANCE_PATH))
-    variants.SetVariantSelection(selected or next(iter(versions)))
+        variant = Sdf.VariantSpec(variants, name)
+        variant.primSpec.referenceList.Prepend(Sdf.Reference(relative_asset_path(root, shot.parent), Sdf.Path(PERFORMANCE_PATH)))
+    actor.variantSetNameList.Prepend(variant_set)
+    actor.variantSelections[variant_set] = selected or next(iter(versions))
+    layer.defaultPrim = path.GetPrefixes()[0].name
     export_atomically(layer, shot)
     return shot
