@@ -110,15 +110,7 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--skull", choices=("take", "truth"), default="take", help="the takes' solved skull, or a simulated corpus's true skull")
     p.add_argument("--epochs", type=int, default=250, help="training epochs (default: 250, as the paper)")
     p.add_argument("--subsample", type=float, default=1.0, help="fraction of the (frame, sample) pairs drawn each epoch")
-    p.add_argument("--samples", type=int, default=344, help="skin samples when the takes define none")
-    p.add_argument("--validation", metavar="NAMES", help="comma-separated take names held out for validation (default: the last take)")
-    p.add_argument("--include", metavar="PATTERN", help="only takes whose name matches this glob pattern")
-    p.add_argument("--exclude", metavar="PATTERN", help="leave out takes whose name matches this glob pattern")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="auto", help="torch device: auto, cpu, cuda")
-    p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto", help="feature kernels")
-    p.add_argument("--json", action="store_true", help="print a JSON report")
-    p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
+    _add_training_arguments(p)
     p.set_defaults(handler=_cmd_train_removal)
 
     p = commands.add_parser("train-synthesis", help="train the synthesis network H on a corpus and write a model file")
@@ -127,15 +119,7 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--quasistatic", required=True, metavar="MODEL|truth", help="a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes)")
     p.add_argument("--skull", choices=("take", "truth"), default="take", help="the takes' solved skull, or a simulated corpus's true skull")
     p.add_argument("--epochs", type=int, default=30, help="training epochs (default: 30, as the paper)")
-    p.add_argument("--samples", type=int, default=344, help="skin samples when the takes define none (with --quasistatic truth)")
-    p.add_argument("--validation", metavar="NAMES", help="comma-separated take names held out for validation (default: the last take)")
-    p.add_argument("--include", metavar="PATTERN", help="only takes whose name matches this glob pattern")
-    p.add_argument("--exclude", metavar="PATTERN", help="leave out takes whose name matches this glob pattern")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="auto", help="torch device: auto, cpu, cuda")
-    p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto", help="stretch and feature kernels")
-    p.add_argument("--json", action="store_true", help="print a JSON report")
-    p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
+    _add_training_arguments(p)
     p.set_defaults(handler=_cmd_train_synthesis)
 
     p = commands.add_parser("demo", help="run the whole pipeline on the built-in face and report errors against truth")
@@ -154,6 +138,19 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
         else:
             commands.add_parser(name, help=f"processor ({entry_point.value})")
     return parser
+
+
+def _add_training_arguments(p) -> None:
+    """The flags train-removal and train-synthesis share."""
+    p.add_argument("--samples", type=int, default=344, help="skin samples when the takes (or the removal model) define none")
+    p.add_argument("--validation", metavar="NAMES", help="comma-separated take names held out for validation (default: the last take)")
+    p.add_argument("--include", metavar="PATTERN", help="only takes whose name matches this glob pattern")
+    p.add_argument("--exclude", metavar="PATTERN", help="leave out takes whose name matches this glob pattern")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="auto", help="torch device: auto, cpu, cuda")
+    p.add_argument("--backend", choices=("auto", "opencl", "numpy"), default="auto", help="feature and stretch kernels")
+    p.add_argument("--json", action="store_true", help="print a JSON report")
+    p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
 
 
 def _add_processor_parser(commands, processor) -> None:

@@ -35,7 +35,7 @@ from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
 from facedyn.dynamics.targets import moving_average
-from facedyn.dynamics.training import ProgressCallback, Take, TrainConfig, _split, fit
+from facedyn.dynamics.training import ProgressCallback, Take, TrainConfig, fit, split_takes
 from facedyn.performance import UVs
 
 EPOCHS = 30
@@ -92,14 +92,7 @@ def train_synthesis(
     picks the stretch (and removal) kernels (facedyn.kernels.runtime.choose_backend).
     """
     config = config or synthesis_config()
-    takes = [Take.coerce(t) for t in takes]
-    if not takes:
-        raise ValueError("training needs at least one take")
-    rates = {t.name: check_fps(t.fps) for t in takes}
-    fps = rates[takes[0].name]
-    if any(abs(r - fps) > 1e-6 * fps for r in rates.values()):
-        raise ValueError(f"takes run at different frame rates {rates}; a model is trained for one rate")
-    held = _split(takes, config.validation)
+    takes, fps, held = split_takes(takes, config.validation)
     source = _source_description(quasistatic, takes, face, fps)
     nb = _neighbourhoods(neighbourhoods, face)
     lengths = difference_lengths(face.rest_points.astype(np.float32), nb).astype(np.float32)

@@ -198,6 +198,18 @@ def _pairs(prepared: list, device: torch.device) -> PairSet | None:
     )
 
 
+def split_takes(takes: Sequence, validation: Sequence[str] | None) -> tuple[list[Take], float, set[str]]:
+    """(takes as Take objects, their one frame rate, the names held out for validation)."""
+    takes = [Take.coerce(t) for t in takes]
+    if not takes:
+        raise ValueError("training needs at least one take")
+    rates = {t.name: check_fps(t.fps) for t in takes}
+    fps = rates[takes[0].name]
+    if any(abs(r - fps) > 1e-6 * fps for r in rates.values()):
+        raise ValueError(f"takes run at different frame rates {rates}; a model is trained for one rate")
+    return takes, fps, _split(takes, validation)
+
+
 def _split(takes: list[Take], validation: Sequence[str] | None) -> set[str]:
     names = [t.name for t in takes]
     if len(set(names)) != len(names):
@@ -246,14 +258,7 @@ def train_removal(
     picks the feature implementation (facedyn.kernels.runtime.choose_backend).
     """
     config = config or TrainConfig()
-    takes = [Take.coerce(t) for t in takes]
-    if not takes:
-        raise ValueError("training needs at least one take")
-    rates = {t.name: check_fps(t.fps) for t in takes}
-    fps = rates[takes[0].name]
-    if any(abs(r - fps) > 1e-6 * fps for r in rates.values()):
-        raise ValueError(f"takes run at different frame rates {rates}; a model is trained for one rate")
-    held = _split(takes, config.validation)
+    takes, fps, held = split_takes(takes, config.validation)
     device = resolve_device(config.device)
     prepared = {t.name: _prepare(t, face, config, backend) for t in takes}
     train = _pairs([prepared[t.name] for t in takes if t.name not in held], device)
