@@ -31,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     debug = "--debug" in argv
     try:
-        import facedyn  # registers the USD plugins; fails with a clear message if it cannot
+        import facedyn  # noqa: F401  (registers the USD plugins; fails with a clear message if it cannot)
     except Exception as exc:
         print(f"usdfacedyn: error: {exc}", file=sys.stderr)
         return EXIT_FAILURE

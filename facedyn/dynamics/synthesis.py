@@ -35,7 +35,7 @@ from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
 from facedyn.dynamics.targets import moving_average
-from facedyn.dynamics.training import ProgressCallback, Take, TrainConfig, fit, split_takes
+from facedyn.dynamics.training import ProgressCallback, Take, TrainConfig, fit_new_network, split_takes
 from facedyn.performance import UVs
 
 EPOCHS = 30
@@ -102,12 +102,7 @@ def train_synthesis(
     val = _frames([prepared[t.name] for t in takes if t.name in held], device)
 
     spec = NetworkSpec(train.inputs.shape[1], SYNTHESIS_HIDDEN, train.targets.shape[1])
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(config.seed)
-        network = Network(spec)
-    network.set_normalization(*_normalization(train))
-    network.to(device)
-    curve = fit(network, train, val, config, progress)
+    network, curve = fit_new_network(spec, _normalization(train), train, val, config, device, progress)
     errors = _validation_errors(network, val) if val is not None else None
     network.cpu()
     info = {

@@ -137,6 +137,17 @@ def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCal
     return curve
 
 
+def fit_new_network(spec: NetworkSpec, normalization, train, val, config: TrainConfig, device: torch.device,
+                    progress: ProgressCallback | None = None) -> tuple[Network, list[dict]]:
+    """A network initialized from ``config.seed`` (without touching the global RNG), fitted."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        network = Network(spec)
+    network.set_normalization(*normalization)
+    network.to(device)
+    return network, fit(network, train, val, config, progress)
+
+
 @torch.no_grad()
 def mean_squared_error(network: Network, examples, idx: torch.Tensor, batch_size: int) -> float:
     """Mean squared offset error per coordinate (cm^2) over the examples ``idx``."""
@@ -265,14 +276,8 @@ def train_removal(
     val = _pairs([prepared[t.name] for t in takes if t.name in held], device)
     del prepared  # the pair sets hold their own copies; a large corpus cannot afford both
 
-    skull_dims, skin_dims = train.skull.shape[1], train.skin.shape[2]
-    spec: NetworkSpec = removal_spec(skull_dims, skin_dims)
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(config.seed)
-        network = Network(spec)
-    network.set_normalization(*_normalization(train))
-    network.to(device)
-    curve = fit(network, train, val, config, progress)
+    spec: NetworkSpec = removal_spec(train.skull.shape[1], train.skin.shape[2])
+    network, curve = fit_new_network(spec, _normalization(train), train, val, config, device, progress)
     errors = validation_errors(network, val, config.batch_size) if val is not None else None
     network.cpu()
     info = {

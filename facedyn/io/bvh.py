@@ -14,12 +14,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from os import PathLike
-from pathlib import Path
 
 import numpy as np
 
 from facedyn.geometry import quaternion
-from facedyn.io.errors import InputError
+from facedyn.io.errors import InputError, read_lines
 from facedyn.sim.motion import SkullTrajectory
 
 CMU_UNIT_CM = 5.64
@@ -116,12 +115,7 @@ class _Tokens:
 def read_bvh(path: str | PathLike) -> Bvh:
     """Parse a BVH file; any problem is an InputError naming the file and line."""
     path = str(path)
-    try:
-        lines = Path(path).read_text().splitlines()
-    except FileNotFoundError:
-        raise InputError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"cannot read: {exc}") from None
+    lines = read_lines(path)
     motion = next((i for i, line in enumerate(lines) if line.split()[:1] == ["MOTION"]), None)
     if motion is None:
         raise InputError(path, "no MOTION section")

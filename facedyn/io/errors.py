@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from os import PathLike
+from pathlib import Path
 
 from facedyn.errors import FacedynError
 
@@ -20,3 +21,13 @@ class InputError(FacedynError):
         # Rebuild from the parts (not the formatted text) so the error survives pickling,
         # e.g. across a process pool.
         return type(self), (self.path, self.reason, self.line)
+
+
+def read_lines(path: str | PathLike) -> list[str]:
+    """A text file's lines, or an InputError naming the file (missing, unreadable, not text)."""
+    try:
+        return Path(path).read_text().splitlines()
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"cannot read: {exc}") from None

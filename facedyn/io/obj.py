@@ -12,12 +12,11 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from os import PathLike
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facedyn.io.errors import InputError
+from facedyn.io.errors import InputError, read_lines
 from facedyn.performance import UVs
 
 if TYPE_CHECKING:
@@ -57,12 +56,7 @@ class ObjSequence:
 def read_obj(path: str | PathLike) -> ObjMesh:
     """Parse an OBJ file; any problem is an InputError naming the file and line."""
     path = str(path)
-    try:
-        lines = Path(path).read_text().splitlines()
-    except FileNotFoundError:
-        raise InputError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"cannot read: {exc}") from None
+    lines = read_lines(path)
     points: list[list[float]] = []
     uvs: list[list[float]] = []
     counts: list[int] = []

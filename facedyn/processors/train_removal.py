@@ -38,6 +38,23 @@ def load_takes(inputs: list[Path], skull: str, include: str | None, exclude: str
     return takes
 
 
+def validation_names(text: str | None) -> tuple[str, ...] | None:
+    """--validation a,b -> ("a", "b"); None or empty -> None (the trainer's default)."""
+    return tuple(name for name in (text or "").split(",") if name) or None
+
+
+def epoch_reporter(progress: Progress, task: str, epochs: int):
+    """(a training callback that advances `progress` per epoch, the dict holding the last losses)."""
+    last: dict = {}
+    progress.start(task, epochs)
+
+    def on_epoch(epoch, train_loss, val_loss):
+        last.update(epoch=epoch, train=train_loss, val=val_loss)
+        progress.advance()
+
+    return on_epoch, last
+
+
 def _take_name(root: Path) -> str:
     return root.name if root.is_dir() else root.parent.name if root.name in ("take.usda", "truth.usda") else root.stem
 
@@ -52,16 +69,10 @@ def train_removal_command(args) -> dict:
     started = time.perf_counter()
     takes = load_takes(args.inputs, args.skull, args.include, args.exclude, progress)
     face = FaceSetup.from_performance(takes[0][1], sample_count=args.samples)
-    validation = tuple(v for v in (args.validation or "").split(",") if v) or None
-    config = TrainConfig(epochs=args.epochs, subsample=args.subsample, validation=validation, seed=args.seed, device=args.device)
+    config = TrainConfig(epochs=args.epochs, subsample=args.subsample, validation=validation_names(args.validation),
+                         seed=args.seed, device=args.device)
     read_seconds = time.perf_counter() - started
-    progress.start(f"train F ({len(takes)} takes)", config.epochs)
-    curve_tail = {}
-
-    def on_epoch(epoch, train_loss, val_loss):
-        curve_tail.update(epoch=epoch, train=train_loss, val=val_loss)
-        progress.advance()
-
+    on_epoch, curve_tail = epoch_reporter(progress, f"train F ({len(takes)} takes)", config.epochs)
     model = train_removal([Take.from_performance(perf, name) for name, perf in takes], face, config, on_epoch, backend=args.backend)
     progress.finish()
     model.info["training"]["skull"] = args.skull

@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from facedyn.processors.train_removal import load_takes
+from facedyn.processors.train_removal import epoch_reporter, load_takes, validation_names
 from facedyn.progress import Progress
 
 
@@ -39,16 +39,9 @@ def train_synthesis_command(args) -> dict:
         if quasistatic.kind != "removal":
             raise TakeError(f"{args.quasistatic}: a {quasistatic.kind} model; --quasistatic needs a removal model or 'truth'")
         face = quasistatic.face  # H uses F's samples and landmarks
-    validation = tuple(v for v in (args.validation or "").split(",") if v) or None
-    config = synthesis_config(epochs=args.epochs, validation=validation, seed=args.seed, device=args.device)
+    config = synthesis_config(epochs=args.epochs, validation=validation_names(args.validation), seed=args.seed, device=args.device)
     read_seconds = time.perf_counter() - started
-    progress.start(f"train H ({len(takes)} takes)", config.epochs)
-    last = {}
-
-    def on_epoch(epoch, train_loss, val_loss):
-        last.update(epoch=epoch, train=train_loss, val=val_loss)
-        progress.advance()
-
+    on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
     model = train_synthesis([Take.from_performance(perf, name) for name, perf in takes], face, first.uvs,
                             quasistatic, config, on_epoch, backend=args.backend)
     progress.finish()

@@ -11,7 +11,7 @@ takes (Live Link curves) under real walking and hopping head motion (CMU).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
