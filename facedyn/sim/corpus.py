@@ -3,7 +3,8 @@
 A take is a rig driven by expression weights (held, neutral, or real Live Link curves)
 while the skull follows a motion (still, walk, run, hop, a vibrating platform, or real
 mocap); the soft-tissue simulator adds the secondary dynamics. Every take keeps its truth:
-the skull transforms, the quasistatic skin y(t) and the offsets u(t).
+the skull transforms, the quasistatic skin (the rig's shape plus the static gravity sag of
+the head's pose, facedyn.sim.tissue) and the offsets (the dynamics: what motion adds).
 
 Protocol (papers/000): per actor, neutral + 10 held expressions, each under stillness,
 walking, running, hopping and a platform at 6..11 Hz, about 3 s at 120 fps; plus dialog
@@ -70,8 +71,8 @@ class SimulatedTake:
     skull_translate: np.ndarray  # (F, 3) true skull transform
     skull_orient: np.ndarray  # (F, 4) w, x, y, z
     captured: np.ndarray  # (F, N, 3) skull space: quasistatic + offsets (+ tracking noise)
-    quasistatic: np.ndarray  # (F, N, 3) true y(t), skull space
-    offsets: np.ndarray  # (F, N, 3) true u(t), skull space
+    quasistatic: np.ndarray  # (F, N, 3) true quasistatic skin, skull space: the rig's shape + gravity sag
+    offsets: np.ndarray  # (F, N, 3) true secondary dynamics, skull space
     weights: np.ndarray  # (F, K) the expression weights that drove the rig
     info: dict = field(default_factory=dict)
 
@@ -140,8 +141,8 @@ def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | None = No
         skull_translate=trajectory.translate,
         skull_orient=trajectory.orient,
         captured=result.points.astype(np.float32),
-        quasistatic=quasistatic.astype(np.float32),
-        offsets=result.offsets.astype(np.float32),
+        quasistatic=(quasistatic + result.gravity_sag).astype(np.float32),
+        offsets=result.dynamics.astype(np.float32),
         weights=weights,
         info={"motion": spec.motion, "expression": spec.expression, "dialog": spec.dialog and Path(spec.dialog).name},
     )

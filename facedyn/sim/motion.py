@@ -8,8 +8,13 @@ like the face rig), sampled at ``fps`` from time 0, ``round(duration_s * fps)`` 
 The gaits start at the origin and advance along +Z. Their magnitudes follow gait studies of
 the head: walking at ~2 steps/s bobs ~4 cm with vertical acceleration peaks of ~0.4 g;
 running at ~2.8 steps/s has a flight phase (free fall, -1 g) and ~1 g stance peaks;
-hopping at ~2 hops/s has ~1.3 g landing peaks. Each take draws its amplitudes, phases and a
-slow tempo drift from ``seed``, so takes differ but repeat exactly.
+hopping at ~2 hops/s has ~1.3 g landing peaks. On top of the gait's small rhythmic sway the
+head looks around: turns of up to `look_deg` in yaw (a quarter of it in pitch) with
+minimum-jerk profiles, about one a second, never faster than LOOK_MAX_DEG_S, as real
+mocap of walking and hopping shows (CMU subject 131: 95th percentile 100-300 deg/s, peaks
+~400 deg/s); the rotational loads they cause are a large part of real secondary dynamics.
+Each take draws its amplitudes, phases, turns and a slow tempo drift from ``seed``, so
+takes differ but repeat exactly.
 """
 from __future__ import annotations
 
@@ -109,29 +114,32 @@ class _Gait:
     pitch_deg: float  # nodding at the step rate
     yaw_deg: float  # at the stride rate
     roll_deg: float  # at the stride rate
+    look_deg: float  # largest head turn to either side (yaw; pitch turns are a quarter of it)
 
 
-_WALK = _Gait(step_hz=2.0, speed_cm_s=130.0, flight=0.0, bob_cm=2.0, surge_cm=0.8, sway_cm=2.0, pitch_deg=2.0, yaw_deg=2.0, roll_deg=1.5)
-_RUN = _Gait(step_hz=2.8, speed_cm_s=300.0, flight=0.4, bob_cm=0.0, surge_cm=1.0, sway_cm=1.5, pitch_deg=3.0, yaw_deg=3.0, roll_deg=2.0)
-_HOP = _Gait(step_hz=2.0, speed_cm_s=40.0, flight=0.46, bob_cm=0.0, surge_cm=1.0, sway_cm=0.5, pitch_deg=4.0, yaw_deg=1.0, roll_deg=1.0)
+_WALK = _Gait(step_hz=2.0, speed_cm_s=130.0, flight=0.0, bob_cm=2.0, surge_cm=0.8, sway_cm=2.0, pitch_deg=2.0, yaw_deg=2.0, roll_deg=1.5, look_deg=60.0)
+_RUN = _Gait(step_hz=2.8, speed_cm_s=300.0, flight=0.4, bob_cm=0.0, surge_cm=1.0, sway_cm=1.5, pitch_deg=3.0, yaw_deg=3.0, roll_deg=2.0, look_deg=30.0)
+_HOP = _Gait(step_hz=2.0, speed_cm_s=40.0, flight=0.46, bob_cm=0.0, surge_cm=1.0, sway_cm=0.5, pitch_deg=4.0, yaw_deg=1.0, roll_deg=1.0, look_deg=90.0)
+LOOK_MAX_DEG_S = 400.0
+"""The fastest head turn the gaits make (peak angular speed of one turn)."""
 
 
 def walk(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, step_hz: float = 2.0,
-         speed_cm_s: float = 130.0, ramp: Ramp = Ramp()) -> SkullTrajectory:
-    """Walking: ~2 steps/s, ~4 cm bob, vertical acceleration peaks ~0.4 g."""
-    return _gait(replace(_WALK, step_hz=step_hz, speed_cm_s=speed_cm_s), duration_s, fps, seed, ramp)
+         speed_cm_s: float = 130.0, look_deg: float = _WALK.look_deg, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Walking: ~2 steps/s, ~4 cm bob, vertical acceleration peaks ~0.4 g, looking around."""
+    return _gait(replace(_WALK, step_hz=step_hz, speed_cm_s=speed_cm_s, look_deg=look_deg), duration_s, fps, seed, ramp)
 
 
 def run(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, step_hz: float = 2.8,
-        speed_cm_s: float = 300.0, ramp: Ramp = Ramp()) -> SkullTrajectory:
-    """Running: ~2.8 steps/s, free fall between steps, ~1 g stance peaks."""
-    return _gait(replace(_RUN, step_hz=step_hz, speed_cm_s=speed_cm_s), duration_s, fps, seed, ramp)
+        speed_cm_s: float = 300.0, look_deg: float = _RUN.look_deg, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Running: ~2.8 steps/s, free fall between steps, ~1 g stance peaks, looking around."""
+    return _gait(replace(_RUN, step_hz=step_hz, speed_cm_s=speed_cm_s, look_deg=look_deg), duration_s, fps, seed, ramp)
 
 
 def hop(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, hop_hz: float = 2.0,
-        speed_cm_s: float = 40.0, ramp: Ramp = Ramp()) -> SkullTrajectory:
-    """Hopping: ~2 hops/s, ~6 cm flights, 1.2-1.5 g landing peaks."""
-    return _gait(replace(_HOP, step_hz=hop_hz, speed_cm_s=speed_cm_s), duration_s, fps, seed, ramp)
+        speed_cm_s: float = 40.0, look_deg: float = _HOP.look_deg, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Hopping: ~2 hops/s, ~6 cm flights, 1.2-1.5 g landing peaks, turning about."""
+    return _gait(replace(_HOP, step_hz=hop_hz, speed_cm_s=speed_cm_s, look_deg=look_deg), duration_s, fps, seed, ramp)
 
 
 def platform(freq_hz: float, amplitude_cm: float, duration_s: float = 4.0, fps: float = 120.0,
@@ -315,6 +323,8 @@ def _ballistic(phase: np.ndarray, flight: float, step_hz: float) -> np.ndarray:
 def _gait(gait: _Gait, duration_s: float, fps: float, seed: int, ramp: Ramp) -> SkullTrajectory:
     if not (gait.step_hz > 0 and gait.speed_cm_s >= 0):
         raise ValueError(f"step rate must be positive and speed >= 0, got {gait.step_hz} Hz and {gait.speed_cm_s} cm/s")
+    if not 0 <= gait.look_deg <= 180:
+        raise ValueError(f"look_deg must be in [0, 180] degrees, got {gait.look_deg}")
     times = _times(duration_s, fps)
     rng = np.random.default_rng(seed)
     envelope = ramp.envelope(times, duration_s)
@@ -332,10 +342,34 @@ def _gait(gait: _Gait, duration_s: float, fps: float, seed: int, ramp: Ramp) -> 
     lateral = envelope * gait.sway_cm * scale[2] * np.sin(0.5 * phase + shift[2])
     translate = np.stack([lateral, envelope * vertical, forward], axis=1)
 
-    pitch = envelope * np.radians(gait.pitch_deg) * scale[3] * np.sin(phase + shift[3])
-    yaw = envelope * np.radians(gait.yaw_deg) * scale[4] * np.sin(0.5 * phase + shift[4])
+    look_yaw, look_pitch = _head_turns(times, rng, np.radians(gait.look_deg))
+    pitch = envelope * (np.radians(gait.pitch_deg) * scale[3] * np.sin(phase + shift[3]) + look_pitch)
+    yaw = envelope * (np.radians(gait.yaw_deg) * scale[4] * np.sin(0.5 * phase + shift[4]) + look_yaw)
     roll = envelope * np.radians(gait.roll_deg) * scale[5] * np.sin(0.5 * phase + shift[5])
     return SkullTrajectory(translate, _yaw_pitch_roll(yaw, pitch, roll), fps)
+
+
+def _head_turns(times: np.ndarray, rng: np.random.Generator, look: float) -> tuple[np.ndarray, np.ndarray]:
+    """(yaw, pitch) in radians: a head looking around, one turn every 0.6-1.6 s.
+
+    Each turn moves to a new direction (yaw within +-look, pitch within +-look / 4) along a
+    minimum-jerk profile lasting 0.25-0.6 s, or longer where needed to keep its peak angular
+    speed (1.875 x angle / duration) under LOOK_MAX_DEG_S.
+    """
+    yaw, pitch = np.zeros_like(times), np.zeros_like(times)
+    if look == 0 or len(times) < 2:
+        return yaw, pitch
+    start, current = rng.uniform(0.2, 0.8), np.zeros(2)
+    while start < times[-1]:
+        target = rng.uniform(-1.0, 1.0, 2) * np.array([look, 0.25 * look])
+        change = target - current
+        duration = max(rng.uniform(0.25, 0.6), 1.875 * np.abs(change).max() / np.radians(LOOK_MAX_DEG_S))
+        profile = _fade(times - start, duration)
+        yaw += change[0] * profile
+        pitch += change[1] * profile
+        current = target
+        start += duration + rng.uniform(0.35, 1.0)
+    return yaw, pitch
 
 
 def _yaw_pitch_roll(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:

@@ -27,6 +27,13 @@ every load is inertial):
 - C = a M + b K_0 (Rayleigh, K_0 the neutral's stiffness) with `damping_ratio` at
   `soft_hz` and at `bone_hz`; the slowest ring-down loses 90 % in about 0.2 s.
 
+Gravity: turning the head turns gravity in the skull frame, and the tissue sags towards it.
+Held in the new pose, the skin would stay sagged: that static part is the quasistatic
+shape of the pose, not secondary dynamics (nothing about it depends on how the head got
+there, and features built from velocities cannot see a pose). `gravity_sag` is that
+static response, K(t) s(t) = M (g(t) - g(0)), and `dynamics` = u - s is the part caused
+by motion, the truth that removal and synthesis are measured against.
+
 Integration: two-stage Gauss-Legendre (implicit, A-stable, fourth order), so one step per
 120 fps frame agrees with eight to within about 1 % even at 11 Hz. The eigenvectors of its
 Butcher matrix decouple the stage equations into one complex sparse system
@@ -131,10 +138,16 @@ class SimulationResult:
     """A simulated take in skull space. The noise-free truth is ``rest_shapes + offsets``."""
 
     points: np.ndarray  # (F, N, 3) y + u, plus tracking noise when asked for
-    offsets: np.ndarray  # (F, N, 3) u, the true secondary dynamics
+    offsets: np.ndarray  # (F, N, 3) u, the whole deflection from y: dynamics + gravity sag
+    gravity_sag: np.ndarray  # (F, N, 3) s, the static sag of the pose (see the module)
     stiffness_gain: np.ndarray  # (F, N) s_i(t) = 1 + strain_stiffening * |strain|
     attachment_hz: np.ndarray  # (N,) spring frequency of each vertex
     factorizations: int  # sparse factorizations the run needed
+
+    @property
+    def dynamics(self) -> np.ndarray:
+        """(F, N, 3) u - s: the true secondary dynamics, what motion adds to the pose's shape."""
+        return self.offsets - self.gravity_sag
 
 
 def simulate(
@@ -169,16 +182,20 @@ def simulate(
     gain = _stiffness_gain(y, neutral, tri, params.strain_stiffening)
     hz = params.attachment_hz(weights)
     offsets = np.zeros((frames, n, 3), dtype=dtype)
+    sag = np.zeros((frames, n, 3), dtype=dtype)
     factorizations = 0
     if frames > 1 and free.size:
         skull = _SkullMotion(translate, orient, fps, params.gravity_cm_s2)
         tissue = _Tissue(neutral, tri, free, hz[free], params, 1.0 / (fps * params.substeps))
         with _single_threaded_blas():
             factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
+        turned = skull.gravity_change(orient)
+        if np.any(turned):
+            sag[:, free] = tissue.gravity_sag(gain[:, free], turned)
     points = y + offsets
     if noise_cm > 0:
         points += np.random.default_rng(seed).normal(0.0, noise_cm, points.shape).astype(dtype)
-    return SimulationResult(points.astype(dtype, copy=False), offsets, gain, hz, factorizations)
+    return SimulationResult(points.astype(dtype, copy=False), offsets, sag, gain, hz, factorizations)
 
 
 def _validate(rest_shapes, triangles, translate, orient, fps, weights, neutral, noise_cm):
@@ -279,6 +296,10 @@ class _SkullMotion:
         rot_t = np.swapaxes(quaternion.to_matrix(q), 1, 2)
         return (rot_t @ (self._gravity - acceleration)[:, :, None])[:, :, 0]
 
+    def gravity_change(self, orient: np.ndarray) -> np.ndarray:
+        """(F, 3) g(t) - g(0) in skull axes at the sampled orientations."""
+        return self._linear(orient, np.zeros((len(orient), 3))) - self._gravity_ref
+
     def loads(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """At `times`: (g - g(0) - a0, omega, alpha), each (T, 3) in skull axes."""
         q, dq, ddq = self._orient(times), self._orient(times, 1), self._orient(times, 2)
@@ -327,6 +348,39 @@ class _Tissue:
         self.h = h
         self.mu = h * _GL_LAMBDA
         self.tolerance = params.refactor_tolerance
+
+    def gravity_sag(self, gain: np.ndarray, turned: np.ndarray, tolerance: float = 1e-6) -> np.ndarray:
+        """(F, n, 3) static sag s(t) of the free vertices: K(t) s = M (g(t) - g(0)).
+
+        K(t) = M diag(w^2 gain(t)) + c^2 L scales the same in x, y and z, so s(t) =
+        phi(t) (g(t) - g(0)) with K(t) phi = M 1, one scalar field per distinct gain row
+        (a held expression has one). They are solved together by conjugate gradients
+        preconditioned with the factorized K at the mean gain (K is SPD; only its diagonal
+        changes with the expression).
+        """
+        rows, which = np.unique(gain, axis=0, return_inverse=True)
+        base = self.mass * self.spring
+        reference = rows.mean(axis=0)
+        matrix = (sp.diags(base * reference) + self.membrane).tocsr()
+        lu = spla.splu(matrix.tocsc())
+        stiffer = (base[None, :] * (rows - reference)).T  # (n, G): the diagonal beyond the reference
+        b = np.repeat(self.mass[:, None], len(rows), axis=1)
+        phi = lu.solve(b)
+        r = b - (matrix @ phi + stiffer * phi)
+        z = lu.solve(r)
+        p, rz = z.copy(), np.sum(r * z, axis=0)
+        limit = tolerance * np.linalg.norm(self.mass)
+        for _ in range(200):
+            if np.sqrt(np.sum(r * r, axis=0)).max() <= limit:
+                break
+            q = matrix @ p + stiffer * p
+            alpha = rz / np.sum(p * q, axis=0)
+            phi += alpha * p
+            r -= alpha * q
+            z = lu.solve(r)
+            rz, previous = np.sum(r * z, axis=0), rz
+            p = z + (rz / previous) * p
+        return phi.T[which.ravel()][:, :, None] * turned[:, None, :]
 
     def _factorize(self, gain_ref: np.ndarray):
         """At gain_ref: LU of M^-1 (M + mu C + mu^2 K), M^-1 K, and each vertex's

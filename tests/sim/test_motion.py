@@ -53,7 +53,10 @@ def test_gaits_have_realistic_accelerations(source, step_hz, low_g, high_g):
         assert _dominant_hz(trajectory.translate[:, 1], 120.0) == pytest.approx(step_hz, abs=0.2)
         assert trajectory.translate[-1, 2] > trajectory.translate[0, 2]  # advances along +Z
         angles = np.degrees(quaternion.angle_between(quaternion.identity((1,)), trajectory.orient))
-        assert 0.5 < angles.max() < 8  # small head rotations
+        look = {motion.walk: 60.0, motion.run: 30.0, motion.hop: 90.0}[source]
+        assert 0.3 * look < angles.max() < 1.1 * look + 8  # the head looks around, within its range
+        speed = np.degrees(np.linalg.norm(motion.accelerations(trajectory).angular_velocity_world, axis=1))
+        assert 50 < np.percentile(speed, 95) and speed.max() < motion.LOOK_MAX_DEG_S + 30  # as fast as real mocap, no faster
     assert low_g <= min(peaks) and max(peaks) <= high_g, peaks
     assert len(set(np.round(peaks, 6))) == 3  # seeds give different takes
 
@@ -64,6 +67,15 @@ def test_flight_gaits_fall_freely_and_land_hard():
     hop = _vertical_g(motion.hop(6.0, 120.0, 0))
     assert 1.0 <= hop.max() <= 1.5  # landing spikes
     assert np.mean(hop < -0.9) > 0.3  # a large part of each hop is in the air
+
+
+def test_gaits_without_looking_around_keep_small_rotations():
+    for source in (motion.walk, motion.run, motion.hop):
+        trajectory = source(6.0, 120.0, 1, look_deg=0.0)
+        angles = np.degrees(quaternion.angle_between(quaternion.identity((1,)), trajectory.orient))
+        assert 0.5 < angles.max() < 8
+    with pytest.raises(ValueError, match="look_deg"):
+        motion.walk(2.0, 120.0, 0, look_deg=-5.0)
 
 
 def test_walk_speed_and_seed_determinism():

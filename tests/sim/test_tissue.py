@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from scipy.integrate import solve_ivp
 
 from facedyn.geometry import mesh, quaternion
@@ -280,6 +281,35 @@ def test_gravity_sags_by_the_turned_weight():
     turned = quaternion.to_matrix(orient[-1]).T @ g - g  # gravity change seen from the skull
     w0 = 2 * np.pi * params.soft_hz
     np.testing.assert_allclose(result.offsets[-1], np.broadcast_to(turned / w0**2, points.shape), rtol=0.01, atol=1e-6)
+    # that sag is the pose's static shape, not dynamics: exactly turned / w0^2 at every
+    # frame, and once the head is held nothing dynamic is left
+    seen = np.einsum("fji,j->fi", quaternion.to_matrix(orient), g) - g
+    np.testing.assert_allclose(result.gravity_sag, np.broadcast_to(seen[:, None] / w0**2, result.offsets.shape), rtol=1e-5, atol=1e-9)
+    assert np.abs(result.dynamics[-60:]).max() < 0.01 * np.abs(result.offsets[-1]).max()
+    assert np.abs(result.dynamics[:120]).max() > 1e-3 * np.abs(result.offsets[-1]).max()  # the nod itself jiggles a little
+
+
+def test_gravity_sag_is_the_static_solution_under_any_expression(patch):
+    """K(t) s(t) = M (g(t) - g(0)) with the membrane coupling and the expression's stiffening."""
+    points, tris, weights = patch
+    frames = 90
+    t = np.arange(frames) / FPS
+    orient = quaternion.from_axis_angle(np.tile([0.6, 0.0, 0.8], (frames, 1)), np.radians(40.0) * t)
+    y = talking(points, frames)
+    result = simulate(y, tris, np.zeros((frames, 3)), orient, FPS, rigid_weights=weights, neutral=points)
+    params = TissueParams()
+    free = weights < 1.0
+    mass = mesh.vertex_areas(points, tris)[free]
+    lap = mesh.cotangent_laplacian(points, tris, nonnegative=True)[free][:, free]
+    spring = (2 * np.pi * params.attachment_hz(weights[free])) ** 2
+    g = np.array([0.0, -params.gravity_cm_s2, 0.0])
+    turned = np.einsum("fji,j->fi", quaternion.to_matrix(orient), g) - quaternion.to_matrix(orient[0]).T @ g
+    for f in (0, 45, 89):
+        stiffness = sp.diags(mass * spring * result.stiffness_gain[f, free]) + (params.coupling_cm * 2 * np.pi * params.soft_hz) ** 2 * lap
+        residual = stiffness @ result.gravity_sag[f, free] - mass[:, None] * turned[f]
+        assert np.abs(residual).max() <= 1e-5 * np.abs(mass[:, None] * turned[f]).max() + 1e-12
+    assert not np.any(result.gravity_sag[:, ~free]) and not np.any(result.gravity_sag[0])
+    assert len(np.unique(result.stiffness_gain[:, free], axis=0)) > 10  # the expression really changes
 
 
 def test_offsets_are_smooth_fields(patch):
