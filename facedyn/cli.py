@@ -110,6 +110,8 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--skull", choices=("take", "truth"), default="take", help="the takes' solved skull, or a simulated corpus's true skull")
     p.add_argument("--epochs", type=int, default=250, help="training epochs (default: 250, as the paper)")
     p.add_argument("--subsample", type=float, default=1.0, help="fraction of the (frame, sample) pairs drawn each epoch")
+    p.add_argument("--target", choices=("moving-average", "truth"), default="moving-average",
+                   help="F's targets: the paper's moving-average offsets, or a simulated corpus's true dynamics")
     _add_training_arguments(p)
     p.set_defaults(handler=_cmd_train_removal)
 

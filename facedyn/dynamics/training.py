@@ -3,7 +3,13 @@
 Every (frame, skin sample) pair of every take is one example: input [B(t), X_i(t)]
 (facedyn.dynamics.features), target the moving-average offset dx_i(t)
 (facedyn.dynamics.targets). L2 loss, Adam, lr 1e-3, batches of 10,000 pairs; the paper
-trains about 250 epochs. Validation holds out whole takes, never frames of a training
+trains about 250 epochs.
+
+Beyond the paper (its future work: "augmenting the corpus with physical simulation"), a
+simulated corpus knows its true dynamics, and ``target="truth"`` trains on them instead.
+The moving average only sees what changes within 21 frames (175 ms at 120 fps): it keeps
+most of the slow, quasi-static response to walking and head turns, which the true
+dynamics hold in full. Validation holds out whole takes, never frames of a training
 take, because neighbouring frames of one take share most of their windows.
 
 `fit` is the loop itself, written against any example set with ``len`` and
@@ -26,6 +32,7 @@ from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.targets import TARGET_WINDOW, dynamic_offsets
 from facedyn.performance import Performance
 
+TARGETS = ("moving-average", "truth")
 ProgressCallback = Callable[[int, float, "float | None"], None]  # (epoch, train loss, val loss) in cm^2
 
 
@@ -39,6 +46,7 @@ class Take:
     translate: np.ndarray | None = None  # (F, 3); None = identity
     orient: np.ndarray | None = None  # (F, 4) (w, x, y, z); None = identity
     space: str = "skull"
+    dynamics: np.ndarray | None = None  # (F, N, 3) known secondary dynamics, skull frame (a simulated take's truth)
 
     @classmethod
     def coerce(cls, value) -> "Take":
@@ -71,8 +79,11 @@ class TrainConfig:
     max_validation_pairs: int = 200_000  # per epoch's validation loss (a fixed subset)
     seed: int = 0
     device: str = "auto"  # "auto" = cuda when available, else cpu
+    target: str = "moving-average"  # F's targets: "moving-average" (the paper) or "truth" (Take.dynamics)
 
     def __post_init__(self) -> None:
+        if self.target not in TARGETS:
+            raise ValueError(f"target must be one of {TARGETS}, got {self.target!r}")
         if self.epochs < 1 or self.batch_size < 1 or self.max_validation_pairs < 1:
             raise ValueError("epochs, batch_size and max_validation_pairs must be at least 1")
         if not 0 < self.subsample <= 1:
@@ -189,7 +200,15 @@ def _prepare(take: Take, face: FaceSetup, config: TrainConfig, backend: str):
     t, q = check_transforms(take.translate, take.orient, f)
     samples = skull_space(pts[:, face.samples], t, q, take.space)
     feats = compute_features(samples, t, q, face.landmarks, take.fps, space="skull", window=config.window, backend=backend)
-    targets = dynamic_offsets(samples, space="skull", window=config.target_window).astype(np.float32)
+    if config.target == "truth":
+        if take.dynamics is None:
+            raise ValueError(f"take {take.name!r} has no known dynamics to train on (target 'truth' needs a simulated corpus)")
+        dynamics = np.asarray(take.dynamics)
+        if dynamics.shape != pts.shape:
+            raise ValueError(f"take {take.name!r}: dynamics are {dynamics.shape}, its points {pts.shape}")
+        targets = dynamics[:, face.samples].astype(np.float32)
+    else:
+        targets = dynamic_offsets(samples, space="skull", window=config.target_window).astype(np.float32)
     return feats.skull, feats.skin, targets, np.arange(config.trim, f - config.trim)
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import fnmatch
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from facedyn.errors import UsageError
@@ -55,6 +56,16 @@ def epoch_reporter(progress: Progress, task: str, epochs: int):
     return on_epoch, last
 
 
+def read_truths(inputs: list[Path], names: list[str]) -> dict:
+    """{take name: its truth Performance (points = true quasistatic, offsets = true dynamics)}
+    for simulated corpus takes (facedyn.usd.corpus keeps the truth beside each take)."""
+    from facedyn.usd.corpus import read_truth
+    from facedyn.usd.training_data import take_roots
+
+    folders = {_take_name(root): root if root.is_dir() else root.parent for root in take_roots(inputs)}
+    return {name: read_truth(folders[name]) for name in names}
+
+
 def _take_name(root: Path) -> str:
     return root.name if root.is_dir() else root.parent.name if root.name in ("take.usda", "truth.usda") else root.stem
 
@@ -70,10 +81,14 @@ def train_removal_command(args) -> dict:
     takes = load_takes(args.inputs, args.skull, args.include, args.exclude, progress)
     face = FaceSetup.from_performance(takes[0][1], sample_count=args.samples)
     config = TrainConfig(epochs=args.epochs, subsample=args.subsample, validation=validation_names(args.validation),
-                         seed=args.seed, device=args.device)
+                         seed=args.seed, device=args.device, target=args.target)
+    training = [Take.from_performance(perf, name) for name, perf in takes]
+    if args.target == "truth":
+        truths = read_truths(args.inputs, [name for name, _ in takes])
+        training = [replace(take, dynamics=truths[take.name].offsets) for take in training]
     read_seconds = time.perf_counter() - started
     on_epoch, curve_tail = epoch_reporter(progress, f"train F ({len(takes)} takes)", config.epochs)
-    model = train_removal([Take.from_performance(perf, name) for name, perf in takes], face, config, on_epoch, backend=args.backend)
+    model = train_removal(training, face, config, on_epoch, backend=args.backend)
     progress.finish()
     model.info["training"]["skull"] = args.skull
     model.info["training"]["inputs"] = [str(p) for p in args.inputs]

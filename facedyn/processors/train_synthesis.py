@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from facedyn.processors.train_removal import epoch_reporter, load_takes, validation_names
+from facedyn.processors.train_removal import epoch_reporter, load_takes, read_truths, validation_names
 from facedyn.progress import Progress
 
 
@@ -20,7 +20,6 @@ def train_synthesis_command(args) -> dict:
     from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
     from facedyn.dynamics.training import Take
     from facedyn.usd.errors import TakeError
-    from facedyn.usd.training_data import take_roots
 
     progress = Progress.silent() if args.json else Progress()
     started = time.perf_counter()
@@ -29,10 +28,8 @@ def train_synthesis_command(args) -> dict:
     if first.uvs is None:
         raise TakeError(f"{args.inputs[0]}: the takes have no uvs (primvars:st); stretch features need them")
     if args.quasistatic == "truth":
-        from facedyn.usd.corpus import read_truth
-
-        folders = {root.name if root.is_dir() else root.parent.name: root for root in take_roots(args.inputs)}
-        quasistatic = {name: read_truth(folders[name] if folders[name].is_dir() else folders[name].parent).points for name, _ in takes}
+        truths = read_truths(args.inputs, [name for name, _ in takes])
+        quasistatic = {name: truth.points for name, truth in truths.items()}
         face = FaceSetup.from_performance(first, sample_count=args.samples)
     else:
         quasistatic = load_model(args.quasistatic, topology=first.topology, fps=first.fps)
