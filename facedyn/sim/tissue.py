@@ -89,6 +89,8 @@ def _stage_predictor() -> tuple[np.ndarray, np.ndarray]:
 
 _GL_P, _GL_Q = _stage_predictor()
 
+SAG_BLOCK = 32  # distinct expressions solved together for the gravity sag
+
 
 @dataclass(frozen=True)
 class TissueParams:
@@ -187,11 +189,11 @@ def simulate(
     if frames > 1 and free.size:
         skull = _SkullMotion(translate, orient, fps, params.gravity_cm_s2)
         tissue = _Tissue(neutral, tri, free, hz[free], params, 1.0 / (fps * params.substeps))
+        turned = skull.gravity_change(orient)
         with _single_threaded_blas():
             factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
-        turned = skull.gravity_change(orient)
-        if np.any(turned):
-            sag[:, free] = tissue.gravity_sag(gain[:, free], turned)
+            if np.any(turned):
+                sag[:, free] = tissue.gravity_sag(gain[:, free], turned)
     points = y + offsets
     if noise_cm > 0:
         points += np.random.default_rng(seed).normal(0.0, noise_cm, points.shape).astype(dtype)
@@ -349,38 +351,48 @@ class _Tissue:
         self.mu = h * _GL_LAMBDA
         self.tolerance = params.refactor_tolerance
 
-    def gravity_sag(self, gain: np.ndarray, turned: np.ndarray, tolerance: float = 1e-6) -> np.ndarray:
+    def gravity_sag(self, gain: np.ndarray, turned: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
         """(F, n, 3) static sag s(t) of the free vertices: K(t) s = M (g(t) - g(0)).
 
         K(t) = M diag(w^2 gain(t)) + c^2 L scales the same in x, y and z, so s(t) =
         phi(t) (g(t) - g(0)) with K(t) phi = M 1, one scalar field per distinct gain row
-        (a held expression has one). They are solved together by conjugate gradients
-        preconditioned with the factorized K at the mean gain (K is SPD; only its diagonal
-        changes with the expression).
+        (a held expression has one). Rows go through in time order, SAG_BLOCK at a time
+        (SuperLU's solves slow down sharply with many right-hand sides): conjugate
+        gradients preconditioned with K factorized at the block's mean gain, which
+        consecutive frames stay close to (K is SPD; only its diagonal follows the
+        expression), to a residual of `tolerance` relative to M 1.
         """
-        rows, which = np.unique(gain, axis=0, return_inverse=True)
+        _, first, which = np.unique(gain, axis=0, return_index=True, return_inverse=True)
+        order = np.argsort(first)  # distinct rows in the order the take reaches them
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        rows = gain[np.sort(first)]
         base = self.mass * self.spring
-        reference = rows.mean(axis=0)
-        matrix = (sp.diags(base * reference) + self.membrane).tocsr()
-        lu = spla.splu(matrix.tocsc())
-        stiffer = (base[None, :] * (rows - reference)).T  # (n, G): the diagonal beyond the reference
-        b = np.repeat(self.mass[:, None], len(rows), axis=1)
-        phi = lu.solve(b)
-        r = b - (matrix @ phi + stiffer * phi)
-        z = lu.solve(r)
-        p, rz = z.copy(), np.sum(r * z, axis=0)
+        phi = np.empty((len(rows), len(base)))
         limit = tolerance * np.linalg.norm(self.mass)
-        for _ in range(200):
-            if np.sqrt(np.sum(r * r, axis=0)).max() <= limit:
-                break
-            q = matrix @ p + stiffer * p
-            alpha = rz / np.sum(p * q, axis=0)
-            phi += alpha * p
-            r -= alpha * q
+        for a in range(0, len(rows), SAG_BLOCK):
+            block = rows[a:a + SAG_BLOCK]
+            reference = block.mean(axis=0)
+            matrix = (sp.diags(base * reference) + self.membrane).tocsc()
+            lu = spla.splu(matrix)
+            stiffer = (base[None, :] * (block - reference)).T  # (n, G): the diagonal beyond the reference
+            b = np.repeat(self.mass[:, None], len(block), axis=1)
+            x = lu.solve(b)
+            r = b - (matrix @ x + stiffer * x)
             z = lu.solve(r)
-            rz, previous = np.sum(r * z, axis=0), rz
-            p = z + (rz / previous) * p
-        return phi.T[which.ravel()][:, :, None] * turned[:, None, :]
+            p, rz = z.copy(), np.sum(r * z, axis=0)
+            for _ in range(200):
+                if np.sqrt(np.sum(r * r, axis=0)).max() <= limit:
+                    break
+                q = matrix @ p + stiffer * p
+                alpha = rz / np.sum(p * q, axis=0)
+                x += alpha * p
+                r -= alpha * q
+                z = lu.solve(r)
+                rz, previous = np.sum(r * z, axis=0), rz
+                p = z + (rz / previous) * p
+            phi[a:a + len(block)] = x.T
+        return phi[rank[which.ravel()]][:, :, None] * turned[:, None, :]
 
     def _factorize(self, gain_ref: np.ndarray):
         """At gain_ref: LU of M^-1 (M + mu C + mu^2 K), M^-1 K, and each vertex's
