@@ -3,21 +3,28 @@
 Prints one JSON object per case:
 - features: B(t) and X_i(t) for 1,000 frames x 344 samples, NumPy vs the OpenCL kernel;
 - laplacian: the batched sparse Laplacian on 11,248 points x 1,000 frames, SciPy vs OpenCL;
+- auto: the backend ``--backend auto`` picks for each kernel, beside the faster of the two
+  measured here;
 - removal: the whole of remove_dynamics (features, network F, propagation, subtraction) on
-  1,000 frames, in frames per second, excluding I/O and the one-off propagation build.
+  1,000 frames, in frames per second, excluding I/O and the one-off propagation build;
+- removal_with_io: the remove processor as `usdfacedyn remove` runs it (read the stabilized
+  take and the model file, remove, write the quasistatic layer), ICT rig only.
 
-The mesh is a synthetic curved sheet of 148 x 76 = 11,248 points (the ICT-FaceKit skin's
-count) with a rigid top band, and the model is randomly initialised: speed does not depend
-on the weights. Times are the best of ``--repeats`` runs after a warm-up run.
+The mesh is the ICT-FaceKit skin (11,248 points, ../shared/data) with its rigid region, or
+where the rig is absent a synthetic curved sheet of 148 x 76 = 11,248 points with a rigid
+top band. The model is randomly initialised: speed does not depend on the weights. Times
+are the best of ``--repeats`` runs after a warm-up run.
 
-    python benchmarks/bench_remove_speed.py [--frames 1000] [--repeats 3] [--torch-threads N]
+    python benchmarks/bench_remove_speed.py [--frames 1000] [--repeats 3] [--torch-threads N] [--rig PATH|sheet]
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -34,6 +41,7 @@ from facedyn.kernels import runtime
 from facedyn.performance import Topology
 
 ROWS, COLS, FPS, SAMPLES = 148, 76, 120.0, 344
+ICT_RIG = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"
 
 
 def sheet() -> tuple[np.ndarray, Topology, np.ndarray]:
@@ -54,6 +62,47 @@ def take(points: np.ndarray, frames: int) -> tuple[np.ndarray, np.ndarray, np.nd
     orient = quaternion.from_rotvec(np.stack([0.05 * np.sin(2 * np.pi * 8 * time_s), 0.1 * np.sin(time_s), 0 * time_s], 1))
     jiggle = 0.2 * np.sin(2 * np.pi * 8 * time_s + 1.0)[:, None, None] * np.array([0.0, 1.0, 0.3])
     return (points[None] + jiggle).astype(np.float32), translate, orient
+
+
+def mesh(rig_arg: str):
+    """(rig or None, points, topology, face setup): the ICT rig when there is one, else the sheet."""
+    path = Path(rig_arg) if rig_arg != "sheet" else None
+    if path is not None and path.is_file():
+        from facedyn.usd.rig import read_blendshape_rig
+
+        rig = read_blendshape_rig(path)
+        face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, sample_count=SAMPLES)
+        return rig, rig.neutral.astype(np.float64), rig.topology, face
+    points, topology, rigid = sheet()
+    return None, points, topology, FaceSetup.build(topology, points, rigid_vertices=rigid, sample_count=SAMPLES)
+
+
+def removal_with_io(rig, skull_points, translate, orient, model, repeats: int) -> dict:
+    """Time the remove processor end to end on a stabilized take written to a scratch folder."""
+    from facedyn.dynamics.modelfile import save_model
+    from facedyn.processors import registry
+    from facedyn.processors.base import Request
+    from facedyn.processors.runner import execute
+    from facedyn.progress import Progress
+    from facedyn.sim.corpus import SimulatedTake, TakeSpec
+    from facedyn.usd.corpus import write_simulated_take
+    from facedyn.usd.layers import write_take_root
+    from facedyn.usd.timing import Timing
+
+    frames = len(skull_points)
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = Path(scratch) / "take"
+        zeros = np.zeros_like(skull_points)
+        take = SimulatedTake(TakeSpec("speed", "still"), np.arange(1, frames + 1, dtype=np.float64), FPS, translate, orient,
+                             skull_points, zeros, zeros, np.zeros((frames, rig.expression_count), np.float32))
+        write_simulated_take(folder, take, rig)
+        root = write_take_root(folder / "stabilized.usda", [folder / "truth" / "skull.usdc", folder / "capture.usdc"],
+                               Timing(FPS, FPS, 1.0, float(frames)))
+        model_path = save_model(model, Path(scratch) / "actor.removal")
+        output = folder / "quasistatic.usdc"
+        processor = registry.load("remove")
+        seconds = best_of(lambda: execute(processor, Request([root], output, params={"model": str(model_path)}), Progress.silent()), repeats)
+        return {"seconds": seconds, "frames_per_s": frames / seconds, "layer_mb": round(output.stat().st_size / 2**20, 1)}
 
 
 def best_of(fn, repeats: int) -> float:
@@ -78,14 +127,14 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=1000)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--torch-threads", type=int, default=None, help="torch's CPU threads (default: torch's choice)")
+    parser.add_argument("--rig", default=str(ICT_RIG), help="a blend-shape rig's mesh (default: ICT-FaceKit), or 'sheet'")
     args = parser.parse_args()
     if args.torch_threads:
         torch.set_num_threads(args.torch_threads)
     backends = ["numpy"] + (["opencl"] if runtime.available() else [])
 
-    points, topology, rigid = sheet()
     start = time.perf_counter()
-    face = FaceSetup.build(topology, points, rigid_vertices=rigid, sample_count=SAMPLES)
+    rig, points, topology, face = mesh(args.rig)
     setup_s = time.perf_counter() - start
     torch.manual_seed(0)
     model = DynamicsModel("removal", Network(removal_spec()), face, FPS, {"skull": 10, "skin": 10, "target": 10})
@@ -94,12 +143,15 @@ def main() -> None:
     build_s = time.perf_counter() - start
     skull_points, translate, orient = take(points, args.frames)
 
+    mesh_name = rig.name if rig is not None else "sheet"
     world_samples = to_world(skull_points[:, face.samples], translate, orient).astype(np.float32)
     ref = compute_features(world_samples, translate, orient, face.landmarks, FPS, space="world", backend="numpy")
+    measured = {}
     for backend in backends:
         seconds = best_of(lambda: compute_features(world_samples, translate, orient, face.landmarks, FPS, space="world", backend=backend), args.repeats)
         out = compute_features(world_samples, translate, orient, face.landmarks, FPS, space="world", backend=backend)
         diff = max(np.abs(out.skin - ref.skin).max() / np.abs(ref.skin).max(), np.abs(out.skull - ref.skull).max() / np.abs(ref.skull).max())
+        measured.setdefault("features", {})[backend] = seconds
         emit({"case": "features", "backend": backend, "frames": args.frames, "samples": SAMPLES, "seconds": seconds,
               "frames_per_s": args.frames / seconds, "max_rel_diff_vs_numpy": float(diff)})
 
@@ -108,17 +160,27 @@ def main() -> None:
     for backend in backends:
         seconds = best_of(lambda: laplacian_apply(propagator.laplacian, u, backend), args.repeats)
         diff = np.abs(laplacian_apply(propagator.laplacian, u, backend) - ref).max() / np.abs(ref).max()
-        emit({"case": "laplacian", "backend": backend, "points": len(points), "frames": args.frames, "seconds": seconds,
+        measured.setdefault("laplacian", {})[backend] = seconds
+        emit({"case": "laplacian", "backend": backend, "mesh": mesh_name, "points": len(points), "frames": args.frames, "seconds": seconds,
               "frames_per_s": args.frames / seconds, "max_rel_diff_vs_numpy": float(diff)})
+
+    # what --backend auto picks (it measures once per process, then remembers)
+    compute_features(world_samples, translate, orient, face.landmarks, FPS, space="world", backend="auto")
+    laplacian_apply(propagator.laplacian, u, "auto")
+    for kernel, times in measured.items():
+        emit({"case": "auto", "kernel": kernel, "chosen": runtime.choose_backend("auto", kernel),
+              "faster_here": min(times, key=times.get), "seconds": times})
 
     for backend in backends:
         seconds = best_of(lambda: remove_dynamics(skull_points, translate, orient, FPS, model, backend), args.repeats)
         _, offsets = remove_dynamics(skull_points, translate, orient, FPS, model, backend)
         residual = propagator.residual(offsets, "numpy")
-        emit({"case": "removal", "features_backend": backend, "points": len(points), "samples": SAMPLES, "frames": args.frames,
+        emit({"case": "removal", "features_backend": backend, "mesh": mesh_name, "points": len(points), "samples": SAMPLES, "frames": args.frames,
               "seconds": seconds, "frames_per_s": args.frames / seconds, "target_frames_per_s": 300,
-              "one_off_setup_s": {"samples_and_landmarks": setup_s, "propagation_matrix": build_s},
+              "one_off_setup_s": {"rig_samples_and_landmarks": setup_s, "propagation_matrix": build_s},
               "smoothness_residual_median": float(np.median(residual))})
+    if rig is not None:
+        emit({"case": "removal_with_io", "mesh": mesh_name, "frames": args.frames, **removal_with_io(rig, skull_points, translate, orient, model, args.repeats)})
 
 
 if __name__ == "__main__":

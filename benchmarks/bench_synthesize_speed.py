@@ -84,10 +84,11 @@ def bench_synthesis(args, backends) -> None:
     lengths = model.arrays["stretch/neutral_lengths"]
     b = skull_features(translate, orient, face.landmarks, FPS, 10)
     s = stretch_features(quasistatic, nb, lengths, "numpy")
-    inputs = torch.from_numpy(np.concatenate([b, s.reshape(args.frames, -1)], axis=1))
+    device = next(model.network.parameters()).device  # where synthesize_dynamics put H
+    inputs = torch.from_numpy(np.concatenate([b, s.reshape(args.frames, -1)], axis=1)).to(device)
     with torch.inference_mode():
-        d = model.network(inputs).numpy().reshape(args.frames, SAMPLES, 3)
-        network_s = best_of(lambda: model.network(inputs), args.repeats)
+        d = model.network(inputs).cpu().numpy().reshape(args.frames, SAMPLES, 3)
+        network_s = best_of(lambda: model.network(inputs).cpu(), args.repeats)  # .cpu() waits for the GPU
     offsets = np.empty_like(quasistatic)
     stages = {
         "skull_features": best_of(lambda: skull_features(translate, orient, face.landmarks, FPS, 10), args.repeats),
@@ -96,7 +97,7 @@ def bench_synthesis(args, backends) -> None:
         "propagation": best_of(lambda: propagator.apply_into(d, offsets), args.repeats),
         "sum": best_of(lambda: quasistatic + offsets, args.repeats),
     }
-    emit({"case": "synthesize_stages", "stretch_backend": "numpy", "frames": args.frames, "points": len(points),
+    emit({"case": "synthesize_stages", "stretch_backend": "numpy", "network_device": str(device), "frames": args.frames, "points": len(points),
           "seconds": {k: round(v, 5) for k, v in stages.items()}})
 
 

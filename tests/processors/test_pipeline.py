@@ -109,3 +109,28 @@ def test_processor_input_errors(corpus, capsys):
     (take / "junk.removal").write_bytes(b"\x80\x04 not a model")
     assert cli("remove", take / "truth.usda", "--model", take / "junk.removal", "-o", take / "q.usdc") == 1
     assert not (take / "q.usdc").exists() and not (take / "s.usdc").exists()
+
+
+def test_train_removal_on_true_dynamics(corpus, capsys, tmp_path):
+    """--target truth reads each take's true dynamics from its truth layers and records it."""
+    import json
+
+    from facedyn.dynamics.modelfile import load_model
+
+    folder, _ = corpus
+    assert cli("train-removal", folder, "-o", tmp_path / "f.removal", "--skull", "truth", "--target", "truth",
+               "--epochs", "2", "--include", "smile*", "--samples", "32") == 0
+    report = json.loads(capsys.readouterr().out)
+    model = load_model(tmp_path / "f.removal")
+    assert model.info["training"]["config"]["target"] == "truth" and report["takes"] == 4
+    # a take without truth layers (a real capture) is refused with the take named
+    take = tmp_path / "real"
+    take.mkdir()
+    for name in ("capture.usdc", "take.usda"):
+        (take / name).write_bytes((folder / "smile_walk" / name).read_bytes())
+    (take / "truth").mkdir()
+    (take / "truth" / "skull.usdc").write_bytes((folder / "smile_walk" / "truth" / "skull.usdc").read_bytes())
+    assert cli("train-removal", take, "-o", tmp_path / "g.removal", "--skull", "truth", "--target", "truth", "--epochs", "1") == 1
+    err = capsys.readouterr().err
+    assert "truth.usda" in err and "Traceback" not in err
+    assert not (tmp_path / "g.removal").exists()

@@ -1,0 +1,202 @@
+"""Synthesis and retargeting accuracy against truth (issue: synthesize and retarget).
+
+Actor A is the rig; actor B is another identity of it (identity modes drawn from
+``--b-identity-seed``) whose tissue is softer (``--b-soft-hz``; A has the simulator's
+default). Each actor gets the standard corpus (neutral + held expressions under walk, run,
+hop and platforms, 3 s at 120 fps, 0.01 cm tracking noise) without its 9 Hz platform takes,
+F trained on it (the paper's moving-average targets) and two synthesis networks: H on F's
+quasistatic output (the paper) and H on the simulator's true quasistatic shapes. Prints
+one JSON object per case, every error an RMS over the face vertices as a fraction of the
+true dynamics' RMS:
+
+- re-synthesis (the paper's Fig. 7): remove with F, re-synthesize with H under the take's
+  own motion, residual against the captured take; on A's held expressions on the unseen
+  9 Hz platform, and on a dialog take (Live Link speech) under CMU 131_03 hopping;
+- novel motion: A's true quasistatic dialog performance synthesized under motions no
+  training take has (CMU 131_03 hopping, a procedural run of a new seed), against the
+  simulator's dynamics for the same motion; "no dynamics" scores 100%;
+- retargeting (Fig. 10): A's dialog under CMU hopping moved onto B: B's H driven by A's
+  skull trajectory aligned to B's rest frame, against the naive transfer of A's true
+  per-vertex dynamics, both against B simulated under that motion;
+- training: F's and H's training time on 2 CPU cores (``--device cpu``).
+
+    python benchmarks/bench_synthesize_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--actors A B]
+
+``--actors A`` runs A's training, re-synthesis and novel motion; ``--actors B`` B's training
+and the retargeting (which needs only A's simulated take, not A's networks).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from facedyn.dynamics.face import FaceSetup
+from facedyn.dynamics.removal import remove_dynamics
+from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
+from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
+from facedyn.dynamics.training import Take, TrainConfig, train_removal
+from facedyn.evaluation import residual_fraction
+from facedyn.sim.corpus import PLATFORM_HZ, TakeSpec, held_expressions, simulate_take, simulate_takes
+from facedyn.sim.default_face import default_face
+from facedyn.sim.tissue import TissueParams, simulate
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+NOISE_CM = 0.01
+HELD_HZ = 9
+SPEECH = DATA / "livelink-face" / "MySlate_3_Jason_Millers_iPhone.csv"
+HOP = DATA / "cmu-mocap" / "131_03.bvh"
+
+
+@dataclass
+class Actor:
+    name: str
+    rig: object
+    tissue: TissueParams
+    face: FaceSetup
+    removal: object = None
+    synthesis: dict | None = None  # {"F": H trained on F's quasistatic, "truth": H trained on the true quasistatic}
+    seconds: dict | None = None
+
+
+def emit(**fields) -> None:
+    print(json.dumps(fields), flush=True)
+
+
+def fraction(estimate, truth, dynamics, vertices) -> float:
+    return round(residual_fraction(estimate, truth, dynamics, vertices)["fraction"], 3)
+
+
+def train_actor(actor: Actor, expressions: int, seconds: float, f_epochs: int, f_subsample: float, h_epochs: int, device: str, jobs: int) -> None:
+    """Simulate the actor's corpus (all but the held-out platform) and train F and both Hs."""
+    specs = []
+    for i, expression in enumerate([None] + held_expressions(actor.rig, expressions)):
+        for motion in ["walk", "run", "hop"] + [f"platform:{hz}" for hz in PLATFORM_HZ if hz != HELD_HZ]:
+            specs.append(TakeSpec(f"{expression or 'neutral'}_{motion}", motion, expression, duration_s=seconds,
+                                  seed=i * 31 + len(specs), noise_cm=NOISE_CM))
+    t0 = time.perf_counter()
+    takes, quasistatic = [], {}
+    for sim in simulate_takes(actor.rig, specs, actor.tissue, jobs):
+        takes.append(Take(sim.spec.name, sim.captured, sim.fps, sim.skull_translate, sim.skull_orient))
+        quasistatic[sim.spec.name] = sim.quasistatic
+    simulated = time.perf_counter() - t0
+    validation = (takes[-1].name,)
+    t0 = time.perf_counter()
+    actor.removal = train_removal(takes, actor.face, TrainConfig(epochs=f_epochs, subsample=f_subsample, validation=validation, device=device))
+    f_seconds = time.perf_counter() - t0
+    actor.synthesis, h_seconds = {}, {}
+    for source, y in (("F", actor.removal), ("truth", quasistatic)):
+        t0 = time.perf_counter()
+        actor.synthesis[source] = train_synthesis(takes, actor.face, actor.rig.uvs, y, synthesis_config(epochs=h_epochs, validation=validation, device=device))
+        h_seconds[source] = round(time.perf_counter() - t0, 1)
+    emit(case="training", actor=actor.name, rig=actor.rig.name, soft_hz=actor.tissue.soft_hz, takes=len(takes),
+         frames=int(sum(len(t.points) for t in takes)), simulate_seconds=round(simulated, 1),
+         f_epochs=f_epochs, f_subsample=f_subsample, f_train_seconds=round(f_seconds, 1),
+         f_final_loss_cm2=float(f"{actor.removal.info['loss_curve'][-1]['train_loss']:.4g}"),
+         h_epochs=h_epochs, h_train_seconds=h_seconds,
+         h_final_loss_cm2={k: float(f"{m.info['loss_curve'][-1]['train_loss']:.4g}") for k, m in actor.synthesis.items()},
+         h_validation_rms_cm={k: round(m.info["validation"]["rms_cm"], 4) for k, m in actor.synthesis.items()},
+         device=device)
+
+
+def resynthesis(actor: Actor, label: str, sims: list) -> None:
+    """Remove with F, re-synthesize with each H under the take's own motion (Fig. 7)."""
+    fv = actor.rig.face_vertices
+    removed = [remove_dynamics(s.captured, s.skull_translate, s.skull_orient, s.fps, actor.removal)[0] for s in sims]
+    captured = np.concatenate([s.captured for s in sims])
+    dynamics = np.concatenate([s.offsets for s in sims])
+    result = {"case": "re-synthesis", "actor": actor.name, "test": label, "takes": len(sims),
+              "dynamics_rms_cm": round(residual_fraction(captured, captured, dynamics, fv)["dynamics_rms_cm"], 4),
+              "removed_only": fraction(np.concatenate(removed), captured, dynamics, fv)}
+    for source, model in actor.synthesis.items():
+        points = [synthesize_dynamics(y, s.skull_translate, s.skull_orient, s.fps, model)[0] for y, s in zip(removed, sims)]
+        result[f"H_{source}"] = fraction(np.concatenate(points), captured, dynamics, fv)
+    emit(**result)
+
+
+def novel_motion(actor: Actor, label: str, sim) -> None:
+    """Synthesize on the true quasistatic performance under the take's motion; compare offsets."""
+    fv = actor.rig.face_vertices
+    result = {"case": "novel motion", "actor": actor.name, "motion": label, "frames": len(sim.captured),
+              "dynamics_rms_cm": round(residual_fraction(sim.offsets, sim.offsets, sim.offsets, fv)["dynamics_rms_cm"], 4),
+              "no_dynamics": fraction(np.zeros_like(sim.offsets), sim.offsets, sim.offsets, fv)}
+    for source, model in actor.synthesis.items():
+        _, offsets = synthesize_dynamics(sim.quasistatic, sim.skull_translate, sim.skull_orient, sim.fps, model)
+        result[f"H_{source}"] = fraction(offsets, sim.offsets, sim.offsets, fv)
+    emit(**result)
+
+
+def retarget(a: Actor, b: Actor, source) -> None:
+    """A's take under its motion onto B: B's H on the aligned trajectory vs delta transfer."""
+    rigid = a.face.rigid_vertices
+    t_b, q_b = align_trajectory(source.skull_translate, source.skull_orient, a.rig.neutral, b.rig.neutral, vertices=rigid)
+    y_b = b.rig.evaluate(source.weights)
+    truth = simulate(y_b, b.rig.topology.triangles(), t_b, q_b, source.fps, b.tissue, rigid_weights=b.rig.rigid_weights, neutral=b.rig.neutral)
+    rotation, _ = skull_correspondence(a.rig.neutral, b.rig.neutral, rigid)
+    y_true = y_b + truth.gravity_sag
+    _, delta = delta_transfer(source.offsets, y_true, rotation)
+    fv = b.rig.face_vertices
+    b_dynamics = truth.dynamics
+    result = {"case": "retargeting", "source": a.name, "target": b.name, "motion": source.spec.motion.split("/")[-1],
+              "frames": len(y_b), "source_soft_hz": a.tissue.soft_hz, "target_soft_hz": b.tissue.soft_hz,
+              "target_dynamics_rms_cm": round(residual_fraction(b_dynamics, b_dynamics, b_dynamics, fv)["dynamics_rms_cm"], 4),
+              "delta_transfer": fraction(delta, b_dynamics, b_dynamics, fv)}
+    for name, model in b.synthesis.items():
+        _, offsets = synthesize_dynamics(y_true, t_b, q_b, source.fps, model)
+        result[f"synthesis_H_{name}"] = fraction(offsets, b_dynamics, b_dynamics, fv)
+    emit(**result)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rig", type=Path)
+    parser.add_argument("--expressions", type=int, default=10)
+    parser.add_argument("--b-expressions", type=int, default=5, help="held expressions in actor B's corpus")
+    parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--f-epochs", type=int, default=20)
+    parser.add_argument("--f-subsample", type=float, default=0.25)
+    parser.add_argument("--h-epochs", type=int, default=30)
+    parser.add_argument("--b-identity-seed", type=int, default=7)
+    parser.add_argument("--b-soft-hz", type=float, default=5.5, help="B's free-tissue frequency (A: the simulator's default)")
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--actors", nargs="+", choices=("A", "B"), default=["A", "B"], help="which actors to train and evaluate")
+    args = parser.parse_args()
+    if not DATA.is_dir():
+        raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU hopping) is needed for the dialog and hop cases")
+    torch.set_num_threads(os.cpu_count() or 1)
+    if args.rig:
+        from facedyn.usd.rig import read_blendshape_rig
+
+        rig = read_blendshape_rig(args.rig)
+    else:
+        rig = default_face()
+    face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices)
+    a = Actor("A", rig, TissueParams(), face)
+    dialog_hop = simulate_take(rig, TakeSpec("dialog_cmu_hop", f"bvh:{HOP}", dialog=str(SPEECH), duration_s=5.0, seed=4243, noise_cm=NOISE_CM))
+    if "A" in args.actors:
+        train_actor(a, args.expressions, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs)
+        held = [simulate_take(rig, TakeSpec(f"{e}_platform:{HELD_HZ}", f"platform:{HELD_HZ}", e, duration_s=args.seconds, seed=900 + i, noise_cm=NOISE_CM))
+                for i, e in enumerate(held_expressions(rig, args.expressions))]
+        resynthesis(a, f"held expressions, unseen {HELD_HZ} Hz platform", held)
+        del held
+        resynthesis(a, "dialog under CMU 131_03 hopping", [dialog_hop])
+        novel_motion(a, "CMU 131_03 hop", dialog_hop)
+        run = simulate_take(rig, TakeSpec("dialog_run", "run", dialog=str(SPEECH), duration_s=5.0, seed=9001, noise_cm=NOISE_CM))
+        novel_motion(a, "procedural run (new seed)", run)
+        del run
+    if "B" in args.actors:
+        b_rig = rig.make_actor(seed=args.b_identity_seed, name=f"{rig.name}_B")
+        b = Actor("B", b_rig, TissueParams(soft_hz=args.b_soft_hz), FaceSetup.build(
+            b_rig.topology, b_rig.neutral, rigid_weights=b_rig.rigid_weights, face_vertices=b_rig.face_vertices))
+        train_actor(b, args.b_expressions, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs)
+        retarget(a, b, dialog_hop)
+
+if __name__ == "__main__":
+    main()
