@@ -32,9 +32,9 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.targets import dynamic_offsets
 from facedyn.dynamics.training import TARGETS, Take, TrainConfig, train_removal
+from facedyn.cli import _load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PLATFORM_HZ, TakeSpec, held_expressions, simulate_takes
-from facedyn.sim.default_face import default_face
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 NOISE_CM = 0.01
@@ -108,12 +108,7 @@ def main() -> None:
     parser.add_argument("--device", default="cpu", help="torch device for training (the targets are set for 2 CPU cores)")
     args = parser.parse_args()
     torch.set_num_threads(os.cpu_count() or 1)
-    if args.rig:
-        from facedyn.usd.rig import read_blendshape_rig
-
-        rig = read_blendshape_rig(args.rig)
-    else:
-        rig = default_face()
+    rig = _load_rig(args.rig, None)  # the built-in face without --rig
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices)
     fv = rig.face_vertices
     started = time.perf_counter()

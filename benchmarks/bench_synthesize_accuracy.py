@@ -42,9 +42,9 @@ from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
 from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
 from facedyn.dynamics.training import Take, TrainConfig, train_removal
+from facedyn.cli import _load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PLATFORM_HZ, TakeSpec, held_expressions, simulate_take, simulate_takes
-from facedyn.sim.default_face import default_face
 from facedyn.sim.tissue import TissueParams, simulate
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -171,12 +171,7 @@ def main() -> None:
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU hopping) is needed for the dialog and hop cases")
     torch.set_num_threads(os.cpu_count() or 1)
-    if args.rig:
-        from facedyn.usd.rig import read_blendshape_rig
-
-        rig = read_blendshape_rig(args.rig)
-    else:
-        rig = default_face()
+    rig = _load_rig(args.rig, None)  # the built-in face without --rig
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices)
     a = Actor("A", rig, TissueParams(), face)
     dialog_hop = simulate_take(rig, TakeSpec("dialog_cmu_hop", f"bvh:{HOP}", dialog=str(SPEECH), duration_s=5.0, seed=4243, noise_cm=NOISE_CM))
