@@ -111,7 +111,7 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--epochs", type=int, default=250, help="training epochs (default: 250, as the paper)")
     p.add_argument("--subsample", type=float, default=1.0, help="fraction of the (frame, sample) pairs drawn each epoch")
     p.add_argument("--target", choices=("moving-average", "truth"), default="moving-average",
-                   help="F's targets: the paper's moving-average offsets, or a simulated corpus's true dynamics")
+                   help="F's targets: the paper's moving-average offsets, or a simulated corpus's true dynamics (with --skull truth)")
     _add_training_arguments(p)
     p.set_defaults(handler=_cmd_train_removal)
 

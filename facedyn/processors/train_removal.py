@@ -76,6 +76,9 @@ def train_removal_command(args) -> dict:
     from facedyn.dynamics.modelfile import save_model
     from facedyn.dynamics.training import Take, TrainConfig, train_removal
 
+    if args.target == "truth" and args.skull != "truth":
+        raise UsageError("--target truth needs --skull truth: the true dynamics are vectors in the true skull's frame, "
+                         "which a solved skull matches only up to an unknown rigid transform")
     progress = Progress.silent() if args.json else Progress()
     started = time.perf_counter()
     takes = load_takes(args.inputs, args.skull, args.include, args.exclude, progress)

@@ -123,6 +123,9 @@ def test_train_removal_on_true_dynamics(corpus, capsys, tmp_path):
     report = json.loads(capsys.readouterr().out)
     model = load_model(tmp_path / "f.removal")
     assert model.info["training"]["config"]["target"] == "truth" and report["takes"] == 4
+    # true dynamics live in the true skull's frame: a solved skull is refused up front
+    assert cli("train-removal", folder, "-o", tmp_path / "h.removal", "--target", "truth", "--epochs", "1") == 2
+    assert "--skull truth" in capsys.readouterr().err and not (tmp_path / "h.removal").exists()
     # a take without truth layers (a real capture) is refused with the take named
     take = tmp_path / "real"
     take.mkdir()
