@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -46,7 +47,7 @@ class Demo:
         self.results: dict = {}
 
     def step(self, name: str, action):
-        print(f"[demo] {name} ...", flush=True)
+        print(f"[demo] {name} ...", file=sys.stderr, flush=True)
         started = time.perf_counter()
         value = action()
         self.timings[name] = round(time.perf_counter() - started, 2)
@@ -63,7 +64,7 @@ class Demo:
         specs = protocol(rig, self.settings["corpus"], self.data, seed=0, noise_cm=NOISE_CM)
         description = {"scale": self.scale, "rig": rig.name, "points": rig.point_count, "takes": [s.name for s in specs], "noise_cm": NOISE_CM}
         if _existing_corpus(corpus) == description:
-            print(f"[demo] reusing the corpus in {corpus} (same rig, protocol and noise)")
+            print(f"[demo] reusing the corpus in {corpus} (same rig, protocol and noise)", file=sys.stderr)
         else:
             self.step(f"simulate corpus ({len(specs)} takes)", lambda: build_corpus(
                 corpus, rig, specs, progress=self.progress, description=description, jobs=os.cpu_count() or 1))
@@ -111,9 +112,8 @@ class Demo:
         from facedyn.usd.take import read_take
 
         model = models / "actor.removal"
-        args = argparse.Namespace(inputs=[corpus], output=model, skull="truth", epochs=self.settings["f_epochs"],
-                                  subsample=self.settings["f_subsample"], samples=344, validation=None, include=None,
-                                  exclude="dialog*", seed=0, device="auto", backend="auto", json=False)
+        args = _command_line("train-removal", corpus, "-o", model, "--skull", "truth", "--epochs", self.settings["f_epochs"],
+                             "--subsample", self.settings["f_subsample"], "--exclude", "dialog*")
         report = self.step("train removal network F", lambda: train_removal_command(args))
         self.step("remove dynamics", lambda: self.process("remove", [root], take_dir / "quasistatic.usdc", root, model=str(model)))
         removed, _ = read_take(root)
@@ -134,9 +134,8 @@ class Demo:
         from facedyn.usd.take import read_take
 
         model = models / "actor.synthesis"
-        args = argparse.Namespace(inputs=[corpus], output=model, quasistatic=str(models / "actor.removal"), skull="truth",
-                                  epochs=self.settings["h_epochs"], samples=344, validation=None, include=None,
-                                  exclude="dialog*", seed=0, device="auto", backend="auto", json=False)
+        args = _command_line("train-synthesis", corpus, "-o", model, "--quasistatic", models / "actor.removal", "--skull", "truth",
+                             "--epochs", self.settings["h_epochs"], "--exclude", "dialog*")
         report = self.step("train synthesis network H", lambda: train_synthesis_command(args))
         scratch = take_dir / "baselines"
         self.step("re-synthesize under the take's own motion",
@@ -182,6 +181,14 @@ class Demo:
     def summary(self, root: Path) -> dict:
         return {"take": str(root), "scale": self.scale, "results": self.results, "timings_s": self.timings,
                 "total_s": round(sum(self.timings.values()), 1)}
+
+
+def _command_line(*argv) -> argparse.Namespace:
+    """A console command's arguments exactly as usdfacedyn parses them (defaults included)."""
+    from facedyn.cli import build_parser
+
+    words = [str(word) for word in argv]
+    return build_parser(words).parse_args(words)
 
 
 def _existing_corpus(folder: Path) -> dict | None:
