@@ -5,7 +5,9 @@ run and hop (neutral + held expressions, 3 s each at 120 fps, 0.01 cm tracking n
 then remove the dynamics of the held-out takes and of a dialog take (Live Link speech)
 under CMU 131_01 walking that no training take resembles. F is trained twice per split:
 on the paper's moving-average targets (w = 10) and on the simulator's true dynamics
-(``--targets``). Prints one JSON object per case, every figure an RMS over the face
+(``--targets``), each with the paper's skull input (landmark velocities) or, with
+``--skull-features velocity acceleration``, also with facedyn's (landmark accelerations over
+t-30..t+10, facedyn.dynamics.skull_motion). Prints one JSON object per case, every figure an RMS over the face
 vertices (after propagation to the whole mesh) as a fraction of the true dynamics' RMS:
 
 - removed: the removed offsets against the true dynamics, i.e. the removed take against
@@ -15,11 +17,12 @@ vertices (after propagation to the whole mesh) as a fraction of the true dynamic
 - removed_vs_true_quasistatic: the removed take against the noise-free true quasistatic
   skin, with the tracking noise's share of it (noise_floor) alongside.
 
-    python benchmarks/bench_remove_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--held 6 7 8 9 10 11]
+    python benchmarks/bench_remove_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--held 6 7 8 9 10 11] [--skull-features velocity acceleration]
 """
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import time
@@ -30,6 +33,7 @@ import torch
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.removal import remove_dynamics
+from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.targets import dynamic_offsets
 from facedyn.dynamics.training import TARGETS, Take, TrainConfig, train_removal
 from facedyn.cli import _load_rig
@@ -38,6 +42,7 @@ from facedyn.sim.corpus import PLATFORM_HZ, TakeSpec, held_expressions, simulate
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 NOISE_CM = 0.01
+SKULL_INPUTS = {"velocity": None, "acceleration": SkullMotionInput()}  # None: the paper's B(t)
 MOTIONS = ["walk", "run", "hop"] + [f"platform:{hz}" for hz in PLATFORM_HZ]
 
 
@@ -106,6 +111,8 @@ def main() -> None:
     parser.add_argument("--held", type=int, nargs="*", default=list(PLATFORM_HZ), help="held-out frequencies to evaluate")
     parser.add_argument("--targets", nargs="*", choices=TARGETS, default=list(TARGETS))
     parser.add_argument("--device", default="cpu", help="torch device for training (the targets are set for 2 CPU cores)")
+    parser.add_argument("--skull-features", nargs="+", choices=tuple(SKULL_INPUTS), default=["velocity"],
+                        help="F's skull inputs to compare: the paper's velocities (default) and/or facedyn's accelerations")
     args = parser.parse_args()
     torch.set_num_threads(os.cpu_count() or 1)
     rig = _load_rig(args.rig, None)  # the built-in face without --rig
@@ -123,14 +130,15 @@ def main() -> None:
         tests = {f"held-out {held} Hz": [t for t in takes.values() if t.name.endswith(f"platform:{held}")]}
         if dialog:
             tests["dialog under CMU 131_01 walking (never trained on)"] = dialog
-        for target in args.targets:
-            config = TrainConfig(epochs=args.epochs, subsample=args.subsample, validation=(train[-1].name,), target=target, device=args.device)
+        for target, skull_features in itertools.product(args.targets, args.skull_features):
+            config = TrainConfig(epochs=args.epochs, subsample=args.subsample, validation=(train[-1].name,), target=target, device=args.device,
+                                 skull_motion=SKULL_INPUTS[skull_features])
             t0 = time.perf_counter()
             model = train_removal(train, face, config)
             seconds = time.perf_counter() - t0
             curve = model.info["loss_curve"][-1]
             for label, group in tests.items():
-                result = {"case": "removal accuracy", "rig": rig.name, "target": target, "test": label, "held_out_hz": held,
+                result = {"case": "removal accuracy", "rig": rig.name, "target": target, "skull_features": skull_features, "test": label, "held_out_hz": held,
                           "train_takes": len(train), "train_pairs": model.info["training"]["train_pairs"],
                           "epochs": args.epochs, "subsample": args.subsample, "train_seconds": round(seconds, 1),
                           "final_train_loss_cm2": float(f"{curve['train_loss']:.4g}"), "final_val_loss_cm2": float(f"{curve['val_loss']:.4g}"),

@@ -4,8 +4,10 @@ Actor A is the rig; actor B is another identity of it (identity modes drawn from
 ``--b-identity-seed``) whose tissue is softer (``--b-soft-hz``; A has the simulator's
 default). Each actor gets the standard corpus (neutral + held expressions under walk, run,
 hop and platforms, 3 s at 120 fps, 0.01 cm tracking noise) without its 9 Hz platform takes,
-F trained on it (the paper's moving-average targets) and two synthesis networks: H on F's
-quasistatic output (the paper) and H on the simulator's true quasistatic shapes. Prints
+F trained on it (the paper's moving-average targets) and synthesis networks: H on F's
+quasistatic output (the paper) and H on the simulator's true quasistatic shapes, each with
+the skull input facedyn uses by default (landmark accelerations over t-30..t+10) and with
+the paper's (velocities over t-10..t+10); keys H_<quasistatic source>_<skull input>. Prints
 one JSON object per case, every error an RMS over the face vertices as a fraction of the
 true dynamics' RMS:
 
@@ -39,6 +41,7 @@ import torch
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.removal import remove_dynamics
+from facedyn.dynamics.skull_motion import PAPER, SkullMotionInput
 from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
 from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
 from facedyn.dynamics.training import Take, TrainConfig, train_removal
@@ -52,6 +55,7 @@ NOISE_CM = 0.01
 HELD_HZ = 9
 SPEECH = DATA / "livelink-face" / "MySlate_3_Jason_Millers_iPhone.csv"
 HOP = DATA / "cmu-mocap" / "131_03.bvh"
+SKULL_INPUTS = {"acceleration": SkullMotionInput(), "velocity": PAPER}
 
 
 @dataclass
@@ -61,7 +65,7 @@ class Actor:
     tissue: TissueParams
     face: FaceSetup
     removal: object = None
-    synthesis: dict | None = None  # {"F": H trained on F's quasistatic, "truth": H trained on the true quasistatic}
+    synthesis: dict | None = None  # {"<F|truth>_<skull input>": H trained on F's or the true quasistatic}
     seconds: dict | None = None
 
 
@@ -73,7 +77,8 @@ def fraction(estimate, truth, dynamics, vertices) -> float:
     return round(residual_fraction(estimate, truth, dynamics, vertices)["fraction"], 3)
 
 
-def train_actor(actor: Actor, expressions: int, seconds: float, f_epochs: int, f_subsample: float, h_epochs: int, device: str, jobs: int) -> None:
+def train_actor(actor: Actor, expressions: int, seconds: float, f_epochs: int, f_subsample: float, h_epochs: int, device: str, jobs: int,
+                skull_inputs: list[str]) -> None:
     """Simulate the actor's corpus (all but the held-out platform) and train F and both Hs."""
     specs = []
     for i, expression in enumerate([None] + held_expressions(actor.rig, expressions)):
@@ -92,9 +97,11 @@ def train_actor(actor: Actor, expressions: int, seconds: float, f_epochs: int, f
     f_seconds = time.perf_counter() - t0
     actor.synthesis, h_seconds = {}, {}
     for source, y in (("F", actor.removal), ("truth", quasistatic)):
-        t0 = time.perf_counter()
-        actor.synthesis[source] = train_synthesis(takes, actor.face, actor.rig.uvs, y, synthesis_config(epochs=h_epochs, validation=validation, device=device))
-        h_seconds[source] = round(time.perf_counter() - t0, 1)
+        for kind in skull_inputs:
+            t0 = time.perf_counter()
+            config = synthesis_config(epochs=h_epochs, validation=validation, device=device, skull_motion=SKULL_INPUTS[kind])
+            actor.synthesis[f"{source}_{kind}"] = train_synthesis(takes, actor.face, actor.rig.uvs, y, config)
+            h_seconds[f"{source}_{kind}"] = round(time.perf_counter() - t0, 1)
     emit(case="training", actor=actor.name, rig=actor.rig.name, soft_hz=actor.tissue.soft_hz, takes=len(takes),
          frames=int(sum(len(t.points) for t in takes)), simulate_seconds=round(simulated, 1),
          f_epochs=f_epochs, f_subsample=f_subsample, f_train_seconds=round(f_seconds, 1),
@@ -167,6 +174,7 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--actors", nargs="+", choices=("A", "B"), default=["A", "B"], help="which actors to train and evaluate")
+    parser.add_argument("--skull-features", nargs="+", choices=tuple(SKULL_INPUTS), default=list(SKULL_INPUTS), help="H's skull inputs to train and compare")
     args = parser.parse_args()
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU hopping) is needed for the dialog and hop cases")
@@ -176,7 +184,7 @@ def main() -> None:
     a = Actor("A", rig, TissueParams(), face)
     dialog_hop = simulate_take(rig, TakeSpec("dialog_cmu_hop", f"bvh:{HOP}", dialog=str(SPEECH), duration_s=5.0, seed=4243, noise_cm=NOISE_CM))
     if "A" in args.actors:
-        train_actor(a, args.expressions, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs)
+        train_actor(a, args.expressions, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs, args.skull_features)
         held = [simulate_take(rig, TakeSpec(f"{e}_platform:{HELD_HZ}", f"platform:{HELD_HZ}", e, duration_s=args.seconds, seed=900 + i, noise_cm=NOISE_CM))
                 for i, e in enumerate(held_expressions(rig, args.expressions))]
         resynthesis(a, f"held expressions, unseen {HELD_HZ} Hz platform", held)
@@ -190,7 +198,7 @@ def main() -> None:
         b_rig = rig.make_actor(seed=args.b_identity_seed, name=f"{rig.name}_B")
         b = Actor("B", b_rig, TissueParams(soft_hz=args.b_soft_hz), FaceSetup.build(
             b_rig.topology, b_rig.neutral, rigid_weights=b_rig.rigid_weights, face_vertices=b_rig.face_vertices))
-        train_actor(b, args.b_expressions, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs)
+        train_actor(b, args.b_expressions, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs, args.skull_features)
         retarget(a, b, dialog_hop)
 
 if __name__ == "__main__":

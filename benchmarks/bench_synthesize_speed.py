@@ -1,8 +1,8 @@
 """Speed of dynamics synthesis (network H) on an ICT-sized mesh, and of H's training.
 
 Prints one JSON object per case:
-- synthesize: the whole of synthesize_dynamics (B(t), stretch S(t), H, propagation, the
-  sum) on 1,000 frames of 11,248 points with 344 samples, in frames per second, per
+- synthesize: the whole of synthesize_dynamics (B(t), stretch S(t), H, propagation, adding
+  the offsets to the quasistatic skin) on 1,000 frames of 11,248 points with 344 samples, in frames per second, per
   stretch backend, excluding I/O and the one-off propagation build; beside it, in the
   same run, remove_dynamics on the same take (the reference: the other per-take pass);
 - synthesize_stages: the time of each of those steps on the same take (NumPy stretch);
@@ -32,7 +32,8 @@ from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec, removal_spec
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
-from facedyn.dynamics.synthesis import FrameSet, skull_features, stretch_arrays, synthesis_config, synthesize_dynamics
+from facedyn.dynamics.skull_motion import SkullMotionInput
+from facedyn.dynamics.synthesis import FrameSet, stretch_arrays, synthesis_config, synthesize_dynamics
 from facedyn.dynamics.training import fit
 from facedyn.kernels import runtime
 from facedyn.performance import UVs
@@ -54,9 +55,10 @@ def expressions(points: np.ndarray, frames: int) -> np.ndarray:
 def synthesis_model(face: FaceSetup, nb: UVNeighbourhoods) -> DynamicsModel:
     torch.manual_seed(0)
     s = len(face.samples)
-    network = Network(NetworkSpec(315 + 2 * s, SYNTHESIS_HIDDEN, 3 * s))
+    motion = SkullMotionInput()
+    network = Network(NetworkSpec(len(face.landmarks) * motion.width * 3 + 2 * s, SYNTHESIS_HIDDEN, 3 * s))
     lengths = difference_lengths(face.rest_points.astype(np.float32), nb)
-    return DynamicsModel("synthesis", network, face, FPS, {"skull": 10}, arrays=stretch_arrays(nb, lengths))
+    return DynamicsModel("synthesis", network, face, FPS, {"stretch_smoothing": 10}, arrays=stretch_arrays(nb, lengths), skull_motion=motion)
 
 
 def bench_synthesis(args, backends) -> None:
@@ -82,7 +84,7 @@ def bench_synthesis(args, backends) -> None:
               "one_off_propagation_build_s": build_s, "offset_rms_cm": float(np.sqrt(np.mean(offsets.astype(np.float64) ** 2)))})
 
     lengths = model.arrays["stretch/neutral_lengths"]
-    b = skull_features(translate, orient, face.landmarks, FPS, 10)
+    b = model.skull_motion.features(translate, orient, face.landmarks, FPS)
     s = stretch_features(quasistatic, nb, lengths, "numpy")
     device = next(model.network.parameters()).device  # where synthesize_dynamics put H
     inputs = torch.from_numpy(np.concatenate([b, s.reshape(args.frames, -1)], axis=1)).to(device)
@@ -91,11 +93,11 @@ def bench_synthesis(args, backends) -> None:
         network_s = best_of(lambda: model.network(inputs).cpu(), args.repeats)  # .cpu() waits for the GPU
     offsets = np.empty_like(quasistatic)
     stages = {
-        "skull_features": best_of(lambda: skull_features(translate, orient, face.landmarks, FPS, 10), args.repeats),
+        "skull_features": best_of(lambda: model.skull_motion.features(translate, orient, face.landmarks, FPS), args.repeats),
         "stretch": best_of(lambda: stretch_features(quasistatic, nb, lengths, "numpy"), args.repeats),
         "network": network_s,
         "propagation": best_of(lambda: propagator.apply_into(d, offsets), args.repeats),
-        "sum": best_of(lambda: quasistatic + offsets, args.repeats),
+        "add_offsets": best_of(lambda: quasistatic + offsets, args.repeats),
     }
     emit({"case": "synthesize_stages", "stretch_backend": "numpy", "network_device": str(device), "frames": args.frames, "points": len(points),
           "seconds": {k: round(v, 5) for k, v in stages.items()}})
@@ -104,7 +106,7 @@ def bench_synthesis(args, backends) -> None:
 def bench_training(args) -> None:
     config = synthesis_config(epochs=1, device="cpu")
     rng = np.random.default_rng(0)
-    width = 315 + 2 * SAMPLES
+    width = 5 * SkullMotionInput().width * 3 + 2 * SAMPLES  # 5 landmarks
     default_threads = torch.get_num_threads()
     for frames in args.corpus_frames:
         examples = FrameSet(rng.normal(size=(frames, width)).astype(np.float32),

@@ -112,6 +112,8 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--subsample", type=float, default=1.0, help="fraction of the (frame, sample) pairs drawn each epoch")
     p.add_argument("--target", choices=("moving-average", "truth"), default="moving-average",
                    help="F's targets: the paper's moving-average offsets, or a simulated corpus's true dynamics (with --skull truth)")
+    p.add_argument("--skull-features", choices=("velocity", "acceleration"), default="velocity",
+                   help="F's skull input: the paper's landmark velocities over t-10..t+10 (default) or accelerations over t-30..t+10")
     _add_training_arguments(p)
     p.set_defaults(handler=_cmd_train_removal)
 
@@ -121,6 +123,8 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     p.add_argument("--quasistatic", required=True, metavar="MODEL|truth", help="a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes)")
     p.add_argument("--skull", choices=("take", "truth"), default="take", help="the takes' solved skull, or a simulated corpus's true skull")
     p.add_argument("--epochs", type=int, default=30, help="training epochs (default: 30, as the paper)")
+    p.add_argument("--skull-features", choices=("acceleration", "velocity"), default="acceleration",
+                   help="H's skull input: landmark accelerations over t-30..t+10 (default, beyond the paper) or the paper's velocities over t-10..t+10")
     _add_training_arguments(p)
     p.set_defaults(handler=_cmd_train_synthesis)
 

@@ -93,13 +93,16 @@ def pair_transforms(translate: np.ndarray, orient: np.ndarray) -> dict[str, np.n
 
 def windows(velocities: np.ndarray, window: int) -> np.ndarray:
     """(F, ..., 3) per-frame velocities -> (F, ..., (2w+1)*3) windows t-w..t+w, zero outside."""
-    f = len(velocities)
-    pad = [(window, window)] + [(0, 0)] * (velocities.ndim - 1)
-    padded = np.pad(velocities, pad)
-    width = 2 * window + 1
-    idx = np.arange(f)[:, None] + np.arange(width)[None, :]  # (F, 2w+1) into padded
-    win = padded[idx]  # (F, 2w+1, ..., 3)
-    win = np.moveaxis(win, 1, -2)  # (F, ..., 2w+1, 3)
+    return span_windows(velocities, window, window)
+
+
+def span_windows(values: np.ndarray, past: int, future: int) -> np.ndarray:
+    """(F, ..., 3) per-frame vectors -> (F, ..., (past+future+1)*3) windows t-past..t+future, zero outside."""
+    f = len(values)
+    padded = np.pad(values, [(past, future)] + [(0, 0)] * (values.ndim - 1))
+    width = past + future + 1
+    idx = np.arange(f)[:, None] + np.arange(width)[None, :]  # (F, width) into padded
+    win = np.moveaxis(padded[idx], 1, -2)  # (F, ..., width, 3)
     return win.reshape(win.shape[:-2] + (width * 3,))
 
 

@@ -12,7 +12,7 @@ are accepted; anything else, including a pickle or a torch checkpoint, is refuse
 `ModelFileError` before any of its data is read.
 
 The metadata says what the model may be used on: its kind ("removal" for F, "synthesis"
-for H), frame rate, feature windows, the topology's fingerprint, skull landmarks and skin
+for H), frame rate, feature windows (and for H the kind of skull-motion input), the topology's fingerprint, skull landmarks and skin
 sample indices, plus how it was trained (takes, settings, loss curve, validation errors).
 The arrays are the network's weights and normalization, the neutral mesh and rigid region
 that propagation is rebuilt from, and any kind-specific arrays (``DynamicsModel.arrays``,
@@ -33,6 +33,7 @@ import torch
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.network import Network, NetworkSpec
+from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.errors import FacedynError
 from facedyn.performance import Topology
 
@@ -41,7 +42,7 @@ FORMAT_VERSION = 1
 KINDS = ("removal", "synthesis")
 _DTYPES = {"float32": np.float32, "float64": np.float64, "int32": np.int32, "int64": np.int64}
 _MAX_HEADER = 64 << 20
-_RESERVED = ("format", "version", "kind", "fps", "windows", "architecture", "topology_fingerprint", "point_count", "skull_landmarks", "skin_samples", "normalization")
+_RESERVED = ("format", "version", "kind", "fps", "windows", "architecture", "topology_fingerprint", "point_count", "skull_landmarks", "skin_samples", "normalization", "skull_motion")
 
 
 class ModelFileError(FacedynError):
@@ -61,11 +62,19 @@ class DynamicsModel:
     windows: dict  # {"skull": w_b, "skin": w_x, "target": w}
     info: dict = field(default_factory=dict)  # training description, loss curve, validation
     arrays: dict[str, np.ndarray] = field(default_factory=dict)  # kind-specific data (e.g. H's uv neighbourhoods)
+    skull_motion: SkullMotionInput | None = None  # what the network reads of the skull; None = the paper's B(t) over windows["skull"]
     _propagator: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"model kind must be one of {KINDS}, got {self.kind!r}")
+
+    @property
+    def skull_input(self) -> SkullMotionInput:
+        """The skull features the network reads, spelled out also for the paper's default."""
+        if self.skull_motion is not None:
+            return self.skull_motion
+        return SkullMotionInput("velocity", self.windows["skull"], self.windows["skull"])
 
     @property
     def fingerprint(self) -> str:
@@ -116,6 +125,7 @@ def save_model(model: DynamicsModel, path) -> Path:
         "skull_landmarks": face.landmarks.tolist(),
         "skin_samples": face.samples.tolist(),
         "normalization": ["network/input_mean", "network/input_std", "network/output_mean", "network/output_scale"],
+        **({"skull_motion": model.skull_motion.to_json()} if model.skull_motion is not None else {}),
         **model.info,
     }
     table, offset = {}, 0
@@ -204,6 +214,7 @@ def load_model(path, *, topology: Topology | str | None = None, fps: float | Non
             windows={k: int(v) for k, v in metadata["windows"].items()},
             info={k: v for k, v in metadata.items() if k not in _RESERVED},
             arrays={k[len("extra/"):]: v for k, v in arrays.items() if k.startswith("extra/")},
+            skull_motion=_skull_motion(metadata),
         )
     except (KeyError, TypeError, RuntimeError, ValueError) as exc:
         if isinstance(exc, FacedynError):
@@ -214,3 +225,8 @@ def load_model(path, *, topology: Topology | str | None = None, fps: float | Non
     network.eval()
     model.check_compatible(topology, fps)
     return model
+
+
+def _skull_motion(metadata: dict) -> SkullMotionInput | None:
+    """The recorded skull input; None (the paper's B(t)) for files that record none."""
+    return SkullMotionInput.from_json(metadata["skull_motion"]) if "skull_motion" in metadata else None

@@ -65,12 +65,15 @@ def remove_dynamics(
     network = model.network.to(resolve_device(device)).eval()
     dev = next(network.parameters()).device
     window = model.windows["skull"]
+    # facedyn's skull input (model.skull_motion) replaces the kernel's B(t): a few numbers per frame
+    skull = None if model.skull_motion is None else model.skull_motion.features(t, q, model.face.landmarks, fps)
     offsets = np.empty((f, n, 3), np.float32)
     with torch.inference_mode():
         for a in range(0, f, int(chunk_frames)):
             b = min(f, a + int(chunk_frames))
             feats = compute_features(sample_points, t, q, model.face.landmarks, fps, space=space, window=window, frame_range=(a, b), backend=backend)
-            d = network.forward_split(torch.from_numpy(feats.skull).to(dev), torch.from_numpy(feats.skin).to(dev))
+            b_t = feats.skull if skull is None else skull[a:b]
+            d = network.forward_split(torch.from_numpy(b_t).to(dev), torch.from_numpy(feats.skin).to(dev))
             propagator.apply_into(d.cpu().numpy(), offsets[a:b])
     quasistatic = skull_points - offsets
     return quasistatic, offsets

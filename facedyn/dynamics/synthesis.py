@@ -1,10 +1,11 @@
 """Synthesizing secondary dynamics for a new skull motion with network H (papers/000 §6).
 
-H maps the skull's motion B(t) (facedyn.dynamics.features, the same 315 landmark
-velocities as removal) and the surface stretch S(t) of every skin sample
+H maps the skull's motion (facedyn.dynamics.skull_motion: by default the landmarks'
+accelerations over t-30..t+10, 615 numbers; the paper's B(t), the 315 landmark velocities
+that removal also reads, on request) and the surface stretch S(t) of every skin sample
 (facedyn.dynamics.stretch, eq. 8, measured on the quasistatic shape against the neutral)
 to the dynamic offsets dY(t) of all samples jointly: one example per frame, input
-315 + 2 S, output 3 S. Stretch tells H the expression, which changes how the tissue
+skull + 2 S, output 3 S. Stretch tells H the expression, which changes how the tissue
 moves; only the whole face's stretch says which expression it is, hence one joint network.
 
 Training (`train_synthesis`) needs, per take, the quasistatic skin y(t) and the captured
@@ -15,8 +16,8 @@ hidden layers of 256, ReLU, L2, Adam lr 1e-3, batches of 50 frames, about 30 epo
 validation holds out whole takes. The model file keeps everything inference needs: the
 uv neighbourhoods and the neutral's difference lengths beside the usual face setup.
 
-Synthesis (`synthesize_dynamics`) runs on whole blocks of frames: B(t) of the new skull
-motion, S(t) of the quasistatic shape, H, then the Laplacian propagation to every vertex
+Synthesis (`synthesize_dynamics`) runs on whole blocks of frames: the skull features of the
+new skull motion, S(t) of the quasistatic shape, H, then the Laplacian propagation to every vertex
 (facedyn.dynamics.propagate); the result is quasistatic + offsets, in skull space.
 """
 from __future__ import annotations
@@ -28,11 +29,12 @@ import numpy as np
 import torch
 
 from facedyn.dynamics.face import FaceSetup
-from facedyn.dynamics.features import check_fps, skull_velocities, windows
+from facedyn.dynamics.features import check_fps
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec, resolve_device
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
+from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
 from facedyn.dynamics.targets import moving_average
 from facedyn.dynamics.training import ProgressCallback, Take, TrainConfig, fit_new_network, split_takes
@@ -48,18 +50,13 @@ _STRETCH = "stretch/"
 
 
 def synthesis_config(**changes) -> TrainConfig:
-    """The paper's settings for H (30 epochs, batches of 50 frames), with any changes."""
-    return TrainConfig(**{"epochs": EPOCHS, "batch_size": BATCH_FRAMES, **changes})
-
-
-def skull_features(translate, orient, landmarks, fps: float, window: int) -> np.ndarray:
-    """(F, L (2w+1) 3) float32 B(t): the removal network's skull features, without X_i(t)."""
-    b = windows(skull_velocities(translate, orient, landmarks, fps).astype(np.float32), window)
-    return b.reshape(len(b), -1)
+    """The paper's settings for H (30 epochs, batches of 50 frames) and facedyn's skull input
+    (landmark accelerations, facedyn.dynamics.skull_motion), with any changes."""
+    return TrainConfig(**{"epochs": EPOCHS, "batch_size": BATCH_FRAMES, "skull_motion": SkullMotionInput(), **changes})
 
 
 class FrameSet:
-    """Synthesis examples, one per frame: input [B(t), S(t)], target dY(t) of all samples."""
+    """Synthesis examples, one per frame: input [skull features, S(t)], target dY(t) of all samples."""
 
     def __init__(self, inputs: np.ndarray, targets: np.ndarray, device: torch.device):
         self.inputs = torch.from_numpy(inputs).to(device)
@@ -90,13 +87,16 @@ def train_synthesis(
     every take. config defaults to `synthesis_config()`; frames within ``config.trim`` of
     a take's ends are left out, the validation takes are held out whole. ``backend``
     picks the stretch (and removal) kernels (facedyn.kernels.runtime.choose_backend).
+    ``config.skull_motion`` is what H reads of the skull (synthesis_config's default:
+    accelerations; None: the paper's B(t) over ``config.window``).
     """
     config = config or synthesis_config()
+    skull_motion = config.skull_motion or SkullMotionInput("velocity", config.window, config.window)
     takes, fps, held = split_takes(takes, config.validation)
     source = _source_description(quasistatic, takes, face, fps)
     nb = _neighbourhoods(neighbourhoods, face)
     lengths = difference_lengths(face.rest_points.astype(np.float32), nb).astype(np.float32)
-    prepared = {t.name: _prepare(t, face, nb, lengths, quasistatic, config, backend) for t in takes}
+    prepared = {t.name: _prepare(t, face, nb, lengths, quasistatic, config, backend, skull_motion) for t in takes}
     device = resolve_device(config.device)
     train = _frames([prepared[t.name] for t in takes if t.name not in held], device)
     val = _frames([prepared[t.name] for t in takes if t.name in held], device)
@@ -118,8 +118,8 @@ def train_synthesis(
     }
     return DynamicsModel(
         kind="synthesis", network=network, face=face, fps=fps,
-        windows={"skull": config.window, "stretch_smoothing": config.target_window}, info=info,
-        arrays=stretch_arrays(nb, lengths),
+        windows={"stretch_smoothing": config.target_window}, info=info,
+        arrays=stretch_arrays(nb, lengths), skull_motion=skull_motion,
     )
 
 
@@ -154,7 +154,7 @@ def synthesize_dynamics(
     nb, lengths = model_stretch(model)
     y = np.ascontiguousarray(y, dtype=np.float32)
     shape = expression_shape(y, model.windows.get("stretch_smoothing", 0))
-    b = skull_features(t, q, model.face.landmarks, fps, model.windows["skull"])
+    b = model.skull_input.features(t, q, model.face.landmarks, fps)
     propagator = model.propagator()
     network = model.network.to(resolve_device(device)).eval()
     dev = next(network.parameters()).device
@@ -253,8 +253,9 @@ def _source_description(quasistatic, takes: list[Take], face: FaceSetup, fps: fl
     return {"kind": "given"}
 
 
-def _prepare(take: Take, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndarray, quasistatic, config: TrainConfig, backend: str):
-    """(inputs (F', 315 + 2S), targets (F', 3S)) of a take's frames away from its ends."""
+def _prepare(take: Take, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndarray, quasistatic, config: TrainConfig, backend: str,
+             skull_motion: SkullMotionInput):
+    """(inputs (F', skull features + 2S), targets (F', 3S)) of a take's frames away from its ends."""
     pts = check_points(take.points, f"take {take.name!r} points")
     f = len(pts)
     if pts.shape[1] != face.point_count:
@@ -271,7 +272,7 @@ def _prepare(take: Take, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndar
             raise ValueError(f"take {take.name!r}: quasistatic shapes are {y.shape}, its points {pts.shape}")
         targets = skull_space(pts[:, face.samples], t, q, take.space) - y[:, face.samples]
     s = stretch_features(expression_shape(y, config.target_window), nb, lengths, backend)
-    b = skull_features(t, q, face.landmarks, take.fps, config.window)
+    b = skull_motion.features(t, q, face.landmarks, take.fps)
     keep = slice(config.trim, f - config.trim)
     inputs = np.concatenate([b, s.reshape(f, -1)], axis=1)[keep]
     return np.ascontiguousarray(inputs, np.float32), np.ascontiguousarray(targets.reshape(f, -1)[keep], np.float32)

@@ -29,6 +29,7 @@ from facedyn.dynamics.features import WINDOW, check_fps, compute_features
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import Network, NetworkSpec, removal_spec, resolve_device
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
+from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.targets import TARGET_WINDOW, dynamic_offsets
 from facedyn.performance import Performance
 
@@ -80,6 +81,7 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"  # "auto" = cuda when available, else cpu
     target: str = "moving-average"  # F's targets: "moving-average" (the paper) or "truth" (Take.dynamics)
+    skull_motion: SkullMotionInput | None = None  # skull features; None = the paper's B(t) over `window`
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS:
@@ -200,6 +202,7 @@ def _prepare(take: Take, face: FaceSetup, config: TrainConfig, backend: str):
     t, q = check_transforms(take.translate, take.orient, f)
     samples = skull_space(pts[:, face.samples], t, q, take.space)
     feats = compute_features(samples, t, q, face.landmarks, take.fps, space="skull", window=config.window, backend=backend)
+    skull = feats.skull if config.skull_motion is None else config.skull_motion.features(t, q, face.landmarks, take.fps)
     if config.target == "truth":
         if take.dynamics is None:
             raise ValueError(f"take {take.name!r} has no known dynamics to train on (target 'truth' needs a simulated corpus)")
@@ -209,7 +212,7 @@ def _prepare(take: Take, face: FaceSetup, config: TrainConfig, backend: str):
         targets = dynamics[:, face.samples].astype(np.float32)
     else:
         targets = dynamic_offsets(samples, space="skull", window=config.target_window).astype(np.float32)
-    return feats.skull, feats.skin, targets, np.arange(config.trim, f - config.trim)
+    return skull, feats.skin, targets, np.arange(config.trim, f - config.trim)
 
 
 def _pairs(prepared: list, device: torch.device) -> PairSet | None:
@@ -310,4 +313,4 @@ def train_removal(
         "loss_curve": curve,
     }
     windows = {"skull": config.window, "skin": config.window, "target": config.target_window}
-    return DynamicsModel(kind="removal", network=network, face=face, fps=fps, windows=windows, info=info)
+    return DynamicsModel(kind="removal", network=network, face=face, fps=fps, windows=windows, info=info, skull_motion=config.skull_motion)

@@ -74,6 +74,7 @@ def train_removal_command(args) -> dict:
     """Run the training the parsed command line asks for; return a JSON-able report."""
     from facedyn.dynamics.face import FaceSetup
     from facedyn.dynamics.modelfile import save_model
+    from facedyn.dynamics.skull_motion import SkullMotionInput
     from facedyn.dynamics.training import Take, TrainConfig, train_removal
 
     if args.target == "truth" and args.skull != "truth":
@@ -84,7 +85,8 @@ def train_removal_command(args) -> dict:
     takes = load_takes(args.inputs, args.skull, args.include, args.exclude, progress)
     face = FaceSetup.from_performance(takes[0][1], sample_count=args.samples)
     config = TrainConfig(epochs=args.epochs, subsample=args.subsample, validation=validation_names(args.validation),
-                         seed=args.seed, device=args.device, target=args.target)
+                         seed=args.seed, device=args.device, target=args.target,
+                         skull_motion=SkullMotionInput() if args.skull_features == "acceleration" else None)
     training = [Take.from_performance(perf, name) for name, perf in takes]
     if args.target == "truth":
         truths = read_truths(args.inputs, [name for name, _ in takes])
@@ -101,6 +103,7 @@ def train_removal_command(args) -> dict:
         "takes": len(takes),
         "samples": int(len(face.samples)),
         "fps": model.fps,
+        "skull_features": model.skull_input.to_json(),
         "validation": model.info["validation"],
         "final_loss": curve_tail,
         "seconds": {"read": round(read_seconds, 2), "total": round(time.perf_counter() - started, 2)},

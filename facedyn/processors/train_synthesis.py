@@ -3,11 +3,14 @@
 H learns the dynamics offsets x(t) - y(t) of the corpus takes from their skull motion and
 the stretch of their quasistatic skin y(t). As in the paper, y(t) comes from a removal
 model F run on the takes (`--quasistatic MODEL`); beyond the paper, a simulated corpus can
-give its true quasistatic shapes (`--quasistatic truth`).
+give its true quasistatic shapes (`--quasistatic truth`). H reads the skull's landmark
+accelerations by default, the paper's velocities with `--skull-features velocity`
+(facedyn.dynamics.skull_motion says why).
 """
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from facedyn.processors.train_removal import epoch_reporter, load_takes, read_truths, validation_names
@@ -17,6 +20,7 @@ from facedyn.progress import Progress
 def train_synthesis_command(args) -> dict:
     from facedyn.dynamics.face import FaceSetup
     from facedyn.dynamics.modelfile import load_model, save_model
+    from facedyn.dynamics.skull_motion import PAPER
     from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
     from facedyn.dynamics.training import Take
     from facedyn.usd.errors import TakeError
@@ -37,6 +41,8 @@ def train_synthesis_command(args) -> dict:
             raise TakeError(f"{args.quasistatic}: a {quasistatic.kind} model; --quasistatic needs a removal model or 'truth'")
         face = quasistatic.face  # H uses F's samples and landmarks
     config = synthesis_config(epochs=args.epochs, validation=validation_names(args.validation), seed=args.seed, device=args.device)
+    if args.skull_features == "velocity":
+        config = replace(config, skull_motion=PAPER)
     read_seconds = time.perf_counter() - started
     on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
     model = train_synthesis([Take.from_performance(perf, name) for name, perf in takes], face, first.uvs,
@@ -46,6 +52,6 @@ def train_synthesis_command(args) -> dict:
     path = save_model(model, Path(args.output))
     return {
         "model": str(path), "takes": len(takes), "samples": int(len(face.samples)), "fps": model.fps,
-        "quasistatic": str(args.quasistatic), "validation": model.info["validation"], "final_loss": last,
+        "quasistatic": str(args.quasistatic), "skull_features": model.skull_motion.to_json(), "validation": model.info["validation"], "final_loss": last,
         "seconds": {"read": round(read_seconds, 2), "total": round(time.perf_counter() - started, 2)},
     }

@@ -9,6 +9,7 @@ from facedyn.dynamics.modelfile import DynamicsModel, ModelMismatch, load_model,
 from facedyn.dynamics.network import Network, removal_spec
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull import to_world
+from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.training import Take, TrainConfig, train_removal
 
 ROWS, COLS, FPS = 12, 10, 120.0
@@ -106,6 +107,19 @@ def test_world_and_skull_inputs_and_chunks_agree(random_model, corpus):
     np.testing.assert_allclose(o1, o2, atol=1e-4 * np.abs(o1).max())
     np.testing.assert_allclose(q2, skull - o2)
     np.testing.assert_allclose(q1, q2, atol=1e-4)
+
+
+def test_acceleration_input_trains_and_removes_in_chunks(corpus):
+    """F with facedyn's skull input (accelerations over t-30..t+10): the model records it,
+    and chunked removal slices the whole take's skull features exactly."""
+    face, takes, _ = corpus
+    config = TrainConfig(epochs=2, batch_size=1000, validation=("platform_3",), skull_motion=SkullMotionInput())
+    model = train_removal(takes, face, config, backend="numpy")
+    assert model.skull_motion == SkullMotionInput() and model.network.spec.inputs == 5 * 41 * 3 + 63
+    take = takes[0]
+    _, whole = remove_dynamics(take["points"], take["translate"], take["orient"], FPS, model, "numpy", space="world", chunk_frames=1000)
+    _, chunked = remove_dynamics(take["points"], take["translate"], take["orient"], FPS, model, "numpy", space="world", chunk_frames=17)
+    np.testing.assert_allclose(chunked, whole, atol=1e-6)
 
 
 def test_removal_network_equals_the_plain_forward(random_model):

@@ -11,6 +11,7 @@ from facedyn.dynamics.network import Network, removal_spec
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
 from facedyn.dynamics.skull import to_world
+from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods
 from facedyn.dynamics.synthesis import model_stretch, synthesis_config, synthesize_dynamics, train_synthesis
 from facedyn.dynamics.training import Take
@@ -82,7 +83,8 @@ def test_h_reproduces_held_out_dynamics_far_better_than_zero(trained, corpus, fa
     np.testing.assert_array_equal(points, held.quasistatic + offsets)
     assert np.all(offsets[:, face.rigid_vertices] == 0)
     assert trained.kind == "synthesis" and trained.network.spec.hidden == (256, 256)
-    assert trained.network.spec.inputs == 315 + 2 * 32 and trained.network.spec.outputs == 3 * 32
+    assert trained.skull_motion == SkullMotionInput("acceleration", 30, 10)
+    assert trained.network.spec.inputs == 5 * 41 * 3 + 2 * 32 and trained.network.spec.outputs == 3 * 32
     assert trained.info["training"]["quasistatic_source"] == {"kind": "given"}
     assert len(trained.info["loss_curve"]) == 20
 
@@ -102,7 +104,8 @@ def test_a_still_skull_gets_almost_no_dynamics(trained, corpus):
 def test_model_round_trip_and_refusals(trained, corpus, face, rig, tmp_path):
     path = save_model(trained, tmp_path / "h.fdyn")
     loaded = load_model(path, topology=face.topology, fps=FPS)
-    assert loaded.kind == "synthesis" and loaded.windows == {"skull": 10, "stretch_smoothing": 10}
+    assert loaded.kind == "synthesis" and loaded.windows == {"stretch_smoothing": 10}
+    assert loaded.skull_motion == trained.skull_motion
     nb, lengths = model_stretch(loaded)
     nb0, lengths0 = model_stretch(trained)
     for name in ("samples", "vertices", "weights", "one_sided", "uv_steps", "charts"):

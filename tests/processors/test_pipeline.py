@@ -137,3 +137,25 @@ def test_train_removal_on_true_dynamics(corpus, capsys, tmp_path):
     err = capsys.readouterr().err
     assert "truth.usda" in err and "Traceback" not in err
     assert not (tmp_path / "g.removal").exists()
+
+
+def test_training_skull_features(corpus, capsys, tmp_path):
+    """H reads skull accelerations by default, F the paper's velocities; --skull-features switches."""
+    import json
+
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.dynamics.skull_motion import PAPER, SkullMotionInput
+
+    folder, models = corpus
+    assert load_model(models / "h.synthesis").skull_motion == SkullMotionInput("acceleration", 30, 10)
+    assert cli("train-synthesis", folder, "-o", tmp_path / "paper.synthesis", "--quasistatic", "truth", "--skull", "truth",
+               "--skull-features", "velocity", "--epochs", "1", "--include", "smile*") == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["skull_features"] == {"kind": "velocity", "past": 10, "future": 10}
+    model = load_model(tmp_path / "paper.synthesis")
+    assert model.skull_motion == PAPER and model.network.spec.inputs == 315 + 2 * len(model.face.samples)
+    assert load_model(models / "f.removal").skull_input == PAPER
+    assert cli("train-removal", folder, "-o", tmp_path / "acc.removal", "--skull", "truth", "--skull-features", "acceleration",
+               "--epochs", "1", "--include", "smile*", "--samples", "32") == 0
+    assert json.loads(capsys.readouterr().out)["skull_features"] == {"kind": "acceleration", "past": 30, "future": 10}
+    assert load_model(tmp_path / "acc.removal").skull_motion == SkullMotionInput()
