@@ -7,8 +7,12 @@ under CMU 131_01 walking that no training take resembles. F is trained twice per
 on the paper's moving-average targets (w = 10) and on the simulator's true dynamics
 (``--targets``), each with the paper's skull input (landmark velocities) or, with
 ``--skull-features velocity acceleration``, also with facedyn's (landmark accelerations over
-t-30..t+10, facedyn.dynamics.skull_motion). Prints one JSON object per case, every figure an RMS over the face
-vertices (after propagation to the whole mesh) as a fraction of the true dynamics' RMS:
+t-30..t+10, facedyn.dynamics.skull_motion). F on true dynamics also learns from
+``--performances`` Live Link performances other than the test's speech, each under every
+training motion: a performance has a true quasistatic shape in simulation but no
+moving-average target, so the paper's F learns from held expressions only. Prints one
+JSON object per case, every figure an RMS over the face vertices (after propagation to the
+whole mesh) as a fraction of the true dynamics' RMS:
 
 - removed: the removed offsets against the true dynamics, i.e. the removed take against
   the true quasistatic skin plus the capture's own tracking noise, which removing dynamics
@@ -17,14 +21,17 @@ vertices (after propagation to the whole mesh) as a fraction of the true dynamic
 - removed_vs_true_quasistatic: the removed take against the noise-free true quasistatic
   skin, with the tracking noise's share of it (noise_floor) alongside.
 
-    python benchmarks/bench_remove_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--held 6 7 8 9 10 11] [--skull-features velocity acceleration]
+    python benchmarks/bench_remove_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--held 6 7 8 9 10 11] [--skull-features velocity acceleration] [--performances 4]
 """
 from __future__ import annotations
 
 import argparse
+import atexit
 import itertools
 import json
 import os
+import shutil
+import tempfile
 import time
 from pathlib import Path
 
@@ -38,7 +45,7 @@ from facedyn.dynamics.targets import dynamic_offsets
 from facedyn.dynamics.training import TARGETS, Take, TrainConfig, train_removal
 from facedyn.cli import _load_rig
 from facedyn.evaluation import residual_fraction
-from facedyn.sim.corpus import PLATFORM_HZ, TakeSpec, held_expressions, simulate_takes
+from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, SPEECH, TakeSpec, held_expressions, simulate_takes
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 NOISE_CM = 0.01
@@ -46,34 +53,44 @@ SKULL_INPUTS = {"velocity": None, "acceleration": SkullMotionInput()}  # None: t
 MOTIONS = ["walk", "run", "hop"] + [f"platform:{hz}" for hz in PLATFORM_HZ]
 
 
-def corpus_specs(rig, expressions: int, seconds: float) -> list[TakeSpec]:
+def corpus_specs(rig, expressions: int, seconds: float, performances: int) -> list[TakeSpec]:
     specs = []
     for i, expression in enumerate([None] + held_expressions(rig, expressions)):
         for motion in MOTIONS:
             specs.append(TakeSpec(f"{expression or 'neutral'}_{motion}", motion, expression, duration_s=seconds,
                                   seed=i * 31 + len(specs), noise_cm=NOISE_CM))
     if DATA.is_dir():
+        for k, csv in enumerate(PERFORMANCES[:performances]):
+            for motion in MOTIONS:
+                specs.append(TakeSpec(f"performance_{Path(csv).stem}_{motion}", motion, dialog=str(DATA / "livelink-face" / csv),
+                                      duration_s=seconds, seed=7000 + 97 * k + len(specs), noise_cm=NOISE_CM))
         specs.append(TakeSpec("dialog_cmu_walk", f"bvh:{DATA / 'cmu-mocap' / '131_01.bvh'}",
-                              dialog=str(DATA / "livelink-face" / "MySlate_3_Jason_Millers_iPhone.csv"),
+                              dialog=str(DATA / "livelink-face" / SPEECH),
                               duration_s=5.0, seed=4242, noise_cm=NOISE_CM))
     return specs
 
 
 class Kept:
-    """What the benchmark keeps of a simulated take: the capture and its true dynamics, and
+    """What the benchmark keeps of a simulated take: the capture and its true dynamics
+    (memory-mapped from `store`: a corpus with performances outgrows 24 GiB of memory), and
     for test takes the tracking noise on the face vertices."""
 
-    def __init__(self, take, face_vertices, test: bool):
+    def __init__(self, take, face_vertices, test: bool, store: Path):
         self.name = take.spec.name
         self.fps = take.fps
         self.translate, self.orient = take.skull_translate, take.skull_orient
-        self.captured = take.captured
-        self.dynamics = take.offsets
+        self.captured = _spill(store / f"{self.name}.captured.npy", take.captured)
+        self.dynamics = _spill(store / f"{self.name}.dynamics.npy", take.offsets)
         fv = face_vertices
         self.noise = (take.captured[:, fv] - take.quasistatic[:, fv] - take.offsets[:, fv]) if test else None
 
     def as_take(self) -> Take:
         return Take(self.name, self.captured, self.fps, self.translate, self.orient, "skull", self.dynamics)
+
+
+def _spill(path: Path, array: np.ndarray) -> np.ndarray:
+    np.save(path, array)
+    return np.load(path, mmap_mode="r")
 
 
 def evaluate(model, group: list[Kept], face_vertices) -> dict:
@@ -113,24 +130,29 @@ def main() -> None:
     parser.add_argument("--device", default="cpu", help="torch device for training (the targets are set for 2 CPU cores)")
     parser.add_argument("--skull-features", nargs="+", choices=tuple(SKULL_INPUTS), default=["velocity"],
                         help="F's skull inputs to compare: the paper's velocities (default) and/or facedyn's accelerations")
+    parser.add_argument("--performances", type=int, default=4, choices=range(len(PERFORMANCES) + 1), metavar=f"0..{len(PERFORMANCES)}",
+                        help="Live Link performances (not the test's) captured under every training motion, for truth targets (default 4)")
     args = parser.parse_args()
     torch.set_num_threads(os.cpu_count() or 1)
     rig = _load_rig(args.rig, None)  # the built-in face without --rig
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices)
     fv = rig.face_vertices
     started = time.perf_counter()
-    specs = corpus_specs(rig, args.expressions, args.seconds)
-    takes = {t.spec.name: Kept(t, fv, test=t.spec.motion.startswith(("platform", "bvh")))
+    specs = corpus_specs(rig, args.expressions, args.seconds, args.performances)
+    store = Path(tempfile.mkdtemp(prefix="facedyn-bench-"))
+    atexit.register(shutil.rmtree, store, ignore_errors=True)
+    takes = {t.spec.name: Kept(t, fv, t.spec.motion.startswith(("platform", "bvh")), store)
              for t in simulate_takes(rig, specs, jobs=os.cpu_count() or 1)}
     print(json.dumps({"case": "corpus", "rig": rig.name, "takes": len(takes), "frames": sum(len(t.captured) for t in takes.values()),
                       "seconds": round(time.perf_counter() - started, 1)}), flush=True)
     dialog = [t for t in takes.values() if t.name.startswith("dialog")]
     for held in args.held:
-        train = [t.as_take() for t in takes.values() if not t.name.startswith("dialog") and not t.name.endswith(f"platform:{held}")]
-        tests = {f"held-out {held} Hz": [t for t in takes.values() if t.name.endswith(f"platform:{held}")]}
+        trainable = [t for t in takes.values() if not t.name.startswith("dialog") and not t.name.endswith(f"platform:{held}")]
+        tests = {f"held-out {held} Hz": [t for t in takes.values() if t.name.endswith(f"platform:{held}") and not t.name.startswith("performance")]}
         if dialog:
             tests["dialog under CMU 131_01 walking (never trained on)"] = dialog
         for target, skull_features in itertools.product(args.targets, args.skull_features):
+            train = [t.as_take() for t in trainable if target == "truth" or not t.name.startswith("performance")]
             config = TrainConfig(epochs=args.epochs, subsample=args.subsample, validation=(train[-1].name,), target=target, device=args.device,
                                  skull_motion=SKULL_INPUTS[skull_features])
             t0 = time.perf_counter()
@@ -139,7 +161,8 @@ def main() -> None:
             curve = model.info["loss_curve"][-1]
             for label, group in tests.items():
                 result = {"case": "removal accuracy", "rig": rig.name, "target": target, "skull_features": skull_features, "test": label, "held_out_hz": held,
-                          "train_takes": len(train), "train_pairs": model.info["training"]["train_pairs"],
+                          "train_takes": len(train), "train_performance_takes": sum(t.name.startswith("performance") for t in train),
+                          "train_pairs": model.info["training"]["train_pairs"],
                           "epochs": args.epochs, "subsample": args.subsample, "train_seconds": round(seconds, 1),
                           "final_train_loss_cm2": float(f"{curve['train_loss']:.4g}"), "final_val_loss_cm2": float(f"{curve['val_loss']:.4g}"),
                           **evaluate(model, group, fv)}

@@ -4,12 +4,15 @@ Actor A is the rig; actor B is another identity of it (identity modes drawn from
 ``--b-identity-seed``) whose tissue is softer (``--b-soft-hz``; A has the simulator's
 default). Each actor gets the standard corpus (neutral + held expressions under walk, run,
 hop and platforms, 3 s at 120 fps, 0.01 cm tracking noise) without its 9 Hz platform takes,
-F trained on it (the paper's moving-average targets) and synthesis networks: H on F's
-quasistatic output (the paper) and H on the simulator's true quasistatic shapes, each with
-the skull input facedyn uses by default (landmark accelerations over t-30..t+10) and with
-the paper's (velocities over t-10..t+10); keys H_<quasistatic source>_<skull input>. Prints
-one JSON object per case, every error an RMS over the face vertices as a fraction of the
-true dynamics' RMS:
+plus ``--performances`` Live Link performances other than the test's speech under the same
+motions. F is trained on the held expressions (the paper's moving-average targets; a
+performance has none), and synthesis networks: H on F's quasistatic output of the held
+expressions (the paper) and H on the simulator's true quasistatic shapes of all takes
+(train_actor says why only this one learns from performances), each with the skull input
+facedyn uses by default (landmark accelerations over t-30..t+10) and with the paper's
+(velocities over t-10..t+10); keys H_<quasistatic source>_<skull input>. Prints one JSON
+object per case, every error an RMS over the face vertices as a fraction of the true
+dynamics' RMS:
 
 - re-synthesis (the paper's Fig. 7): remove with F, re-synthesize with H under the take's
   own motion, residual against the captured take; on A's held expressions on the unseen
@@ -22,7 +25,7 @@ true dynamics' RMS:
   per-vertex dynamics, both against B simulated under that motion;
 - training: F's and H's training time on 2 CPU cores (``--device cpu``).
 
-    python benchmarks/bench_synthesize_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--actors A B]
+    python benchmarks/bench_synthesize_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--actors A B] [--performances 4]
 
 ``--actors A`` runs A's training, re-synthesis and novel motion; ``--actors B`` B's training
 and the retargeting (which needs only A's simulated take, not A's networks).
@@ -47,7 +50,7 @@ from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, tr
 from facedyn.dynamics.training import Take, TrainConfig, train_removal
 from facedyn.cli import _load_rig
 from facedyn.evaluation import residual_fraction
-from facedyn.sim.corpus import PLATFORM_HZ, TakeSpec, held_expressions, simulate_take, simulate_takes
+from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, TakeSpec, held_expressions, simulate_take, simulate_takes
 from facedyn.sim.tissue import TissueParams, simulate
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -77,33 +80,45 @@ def fraction(estimate, truth, dynamics, vertices) -> float:
     return round(residual_fraction(estimate, truth, dynamics, vertices)["fraction"], 3)
 
 
-def train_actor(actor: Actor, expressions: int, seconds: float, f_epochs: int, f_subsample: float, h_epochs: int, device: str, jobs: int,
-                skull_inputs: list[str]) -> None:
-    """Simulate the actor's corpus (all but the held-out platform) and train F and both Hs."""
+def train_actor(actor: Actor, expressions: int, performances: int, seconds: float, f_epochs: int, f_subsample: float, h_epochs: int,
+                device: str, jobs: int, skull_inputs: list[str]) -> None:
+    """Simulate the actor's corpus (all but the held-out platform) and train F and the Hs.
+
+    As in the paper, F learns from the held expressions only (a performance has no
+    moving-average target). H on true shapes also learns from the performances (the paper
+    adds dialog so that H interpolates between expressions); H on F's output does not: on a
+    performance, F's output carries F's misreading of expression motion as dynamics, which
+    no skull motion explains (measured: dialog re-synthesis 36% without, 50% with them).
+    """
+    motions = ["walk", "run", "hop"] + [f"platform:{hz}" for hz in PLATFORM_HZ if hz != HELD_HZ]
     specs = []
     for i, expression in enumerate([None] + held_expressions(actor.rig, expressions)):
-        for motion in ["walk", "run", "hop"] + [f"platform:{hz}" for hz in PLATFORM_HZ if hz != HELD_HZ]:
+        for motion in motions:
             specs.append(TakeSpec(f"{expression or 'neutral'}_{motion}", motion, expression, duration_s=seconds,
                                   seed=i * 31 + len(specs), noise_cm=NOISE_CM))
+    for k, csv in enumerate(PERFORMANCES[:performances]):
+        for motion in motions:
+            specs.append(TakeSpec(f"performance_{Path(csv).stem}_{motion}", motion, dialog=str(DATA / "livelink-face" / csv),
+                                  duration_s=seconds, seed=7000 + 97 * k + len(specs), noise_cm=NOISE_CM))
     t0 = time.perf_counter()
     takes, quasistatic = [], {}
     for sim in simulate_takes(actor.rig, specs, actor.tissue, jobs):
         takes.append(Take(sim.spec.name, sim.captured, sim.fps, sim.skull_translate, sim.skull_orient))
         quasistatic[sim.spec.name] = sim.quasistatic
     simulated = time.perf_counter() - t0
-    validation = (takes[-1].name,)
+    held = [t for t in takes if not t.name.startswith("performance")]
     t0 = time.perf_counter()
-    actor.removal = train_removal(takes, actor.face, TrainConfig(epochs=f_epochs, subsample=f_subsample, validation=validation, device=device))
+    actor.removal = train_removal(held, actor.face, TrainConfig(epochs=f_epochs, subsample=f_subsample, validation=(held[-1].name,), device=device))
     f_seconds = time.perf_counter() - t0
     actor.synthesis, h_seconds = {}, {}
-    for source, y in (("F", actor.removal), ("truth", quasistatic)):
+    for source, y, group in (("F", actor.removal, held), ("truth", quasistatic, takes)):
         for kind in skull_inputs:
             t0 = time.perf_counter()
-            config = synthesis_config(epochs=h_epochs, validation=validation, device=device, skull_motion=SKULL_INPUTS[kind])
-            actor.synthesis[f"{source}_{kind}"] = train_synthesis(takes, actor.face, actor.rig.uvs, y, config)
+            config = synthesis_config(epochs=h_epochs, validation=(group[-1].name,), device=device, skull_motion=SKULL_INPUTS[kind])
+            actor.synthesis[f"{source}_{kind}"] = train_synthesis(group, actor.face, actor.rig.uvs, y, config)
             h_seconds[f"{source}_{kind}"] = round(time.perf_counter() - t0, 1)
     emit(case="training", actor=actor.name, rig=actor.rig.name, soft_hz=actor.tissue.soft_hz, takes=len(takes),
-         frames=int(sum(len(t.points) for t in takes)), simulate_seconds=round(simulated, 1),
+         performance_takes=len(takes) - len(held), frames=int(sum(len(t.points) for t in takes)), simulate_seconds=round(simulated, 1),
          f_epochs=f_epochs, f_subsample=f_subsample, f_train_seconds=round(f_seconds, 1),
          f_final_loss_cm2=float(f"{actor.removal.info['loss_curve'][-1]['train_loss']:.4g}"),
          h_epochs=h_epochs, h_train_seconds=h_seconds,
@@ -175,6 +190,8 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--actors", nargs="+", choices=("A", "B"), default=["A", "B"], help="which actors to train and evaluate")
     parser.add_argument("--skull-features", nargs="+", choices=tuple(SKULL_INPUTS), default=list(SKULL_INPUTS), help="H's skull inputs to train and compare")
+    parser.add_argument("--performances", type=int, default=4, choices=range(len(PERFORMANCES) + 1), metavar=f"0..{len(PERFORMANCES)}",
+                        help="Live Link performances (not the test's) in each actor's corpus, for H (default 4)")
     args = parser.parse_args()
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU hopping) is needed for the dialog and hop cases")
@@ -184,7 +201,7 @@ def main() -> None:
     a = Actor("A", rig, TissueParams(), face)
     dialog_hop = simulate_take(rig, TakeSpec("dialog_cmu_hop", f"bvh:{HOP}", dialog=str(SPEECH), duration_s=5.0, seed=4243, noise_cm=NOISE_CM))
     if "A" in args.actors:
-        train_actor(a, args.expressions, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs, args.skull_features)
+        train_actor(a, args.expressions, args.performances, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs, args.skull_features)
         held = [simulate_take(rig, TakeSpec(f"{e}_platform:{HELD_HZ}", f"platform:{HELD_HZ}", e, duration_s=args.seconds, seed=900 + i, noise_cm=NOISE_CM))
                 for i, e in enumerate(held_expressions(rig, args.expressions))]
         resynthesis(a, f"held expressions, unseen {HELD_HZ} Hz platform", held)
@@ -198,7 +215,7 @@ def main() -> None:
         b_rig = rig.make_actor(seed=args.b_identity_seed, name=f"{rig.name}_B")
         b = Actor("B", b_rig, TissueParams(soft_hz=args.b_soft_hz), FaceSetup.build(
             b_rig.topology, b_rig.neutral, rigid_weights=b_rig.rigid_weights, face_vertices=b_rig.face_vertices))
-        train_actor(b, args.b_expressions, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs, args.skull_features)
+        train_actor(b, args.b_expressions, args.performances, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs, args.skull_features)
         retarget(a, b, dialog_hop)
 
 if __name__ == "__main__":

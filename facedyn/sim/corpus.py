@@ -8,7 +8,8 @@ the head's pose, facedyn.sim.tissue) and the offsets (the dynamics: what motion 
 
 Protocol (papers/000): per actor, neutral + 10 held expressions, each under stillness,
 walking, running, hopping and a platform at 6..11 Hz, about 3 s at 120 fps; plus dialog
-takes (Live Link curves) under real walking and hopping head motion (CMU).
+takes (Live Link curves): speech under real walking and hopping head motion (CMU), and at
+the standard scale four other performances under every protocol motion.
 """
 from __future__ import annotations
 
@@ -23,6 +24,8 @@ from facedyn.sim.rig import FaceRig
 from facedyn.sim.tissue import TissueParams, simulate
 
 PLATFORM_HZ = (6, 7, 8, 9, 10, 11)
+SPEECH = "MySlate_3_Jason_Millers_iPhone.csv"  # Live Link speech of the dialog test takes
+PERFORMANCES = ("S07-001.csv", "S88-001.csv", "apfel.csv", "facial.csv")  # other Live Link performances, for training
 PLATFORM_AMPLITUDE_CM = 0.15  # 0.73 g at 11 Hz: about 5 mm peak offsets, as in the paper
 MOTIONS = ("still", "walk", "run", "hop") + tuple(f"platform:{hz}" for hz in PLATFORM_HZ)
 
@@ -215,6 +218,8 @@ def protocol(
             if expression is None and scale == "standard":
                 break  # the neutral is captured once, standing still
     specs += dialog_takes(data_dir, dialog_s, seed + 1000, noise_cm)
+    if scale == "standard":
+        specs += performance_takes(data_dir, motions, duration, seed + 2000, noise_cm)
     return specs
 
 
@@ -222,10 +227,28 @@ def dialog_takes(data_dir: Path | None, duration_s: float, seed: int, noise_cm: 
     """Speech under real walking and hopping head motion, when the shared data is there."""
     if data_dir is None or not (data_dir / "livelink-face").is_dir():
         return []
-    csv = data_dir / "livelink-face" / "MySlate_3_Jason_Millers_iPhone.csv"
+    csv = data_dir / "livelink-face" / SPEECH
     mocap = data_dir / "cmu-mocap"
     motions = {"walk": f"bvh:{mocap / '131_01.bvh'}", "hop": f"bvh:{mocap / '131_03.bvh'}"}
     return [
         TakeSpec(f"dialog_{name}", source, dialog=str(csv), duration_s=duration_s, seed=seed + i, noise_cm=noise_cm)
         for i, (name, source) in enumerate(motions.items())
     ]
+
+
+def performance_takes(data_dir: Path | None, motions, duration_s: float, seed: int, noise_cm: float) -> list[TakeSpec]:
+    """Other Live Link performances under every protocol motion (the paper captures dialog
+    under the same motions as the held expressions), when the shared data is there.
+
+    Named dialog_* like the speech takes: the paper's F must not train on them (a
+    performance has no moving-average target), F on true dynamics and H should.
+    """
+    if data_dir is None or not (data_dir / "livelink-face").is_dir():
+        return []
+    specs = []
+    for csv in PERFORMANCES:
+        for kind in motions:
+            name = f"dialog_{Path(csv).stem.replace('-', '_')}_{kind.replace(':', '')}" + ("hz" if kind.startswith("platform") else "")
+            specs.append(TakeSpec(name, kind, dialog=str(data_dir / "livelink-face" / csv), duration_s=duration_s,
+                                  seed=seed + len(specs), noise_cm=noise_cm))
+    return specs
