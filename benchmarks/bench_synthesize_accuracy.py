@@ -44,7 +44,7 @@ import torch
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.removal import remove_dynamics
-from facedyn.dynamics.skull_motion import PAPER, SkullMotionInput
+from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
 from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
 from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
 from facedyn.dynamics.training import Take, TrainConfig, train_removal
@@ -58,7 +58,6 @@ NOISE_CM = 0.01
 HELD_HZ = 9
 SPEECH = DATA / "livelink-face" / "MySlate_3_Jason_Millers_iPhone.csv"
 HOP = DATA / "cmu-mocap" / "131_03.bvh"
-SKULL_INPUTS = {"acceleration": SkullMotionInput(), "velocity": PAPER}
 
 
 @dataclass

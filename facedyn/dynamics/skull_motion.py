@@ -40,7 +40,7 @@ KINDS = ("acceleration", "velocity")
 
 @dataclass(frozen=True)
 class SkullMotionInput:
-    """What H reads of the skull's motion: a kind of landmark vector over frames t-past..t+future."""
+    """What a network reads of the skull's motion: a kind of landmark vector over frames t-past..t+future."""
 
     kind: str = "acceleration"
     past: int = 30
@@ -75,6 +75,9 @@ class SkullMotionInput:
 
 PAPER = SkullMotionInput("velocity", 10, 10)
 """The paper's input: B(t), the landmark velocities over t-10..t+10."""
+
+NAMED = {"acceleration": SkullMotionInput(), "velocity": PAPER}
+"""The inputs by the name `--skull-features` gives them."""
 
 
 def skull_accelerations(translate, orient, landmarks, fps) -> np.ndarray:

@@ -10,7 +10,6 @@ accelerations by default, the paper's velocities with `--skull-features velocity
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from pathlib import Path
 
 from facedyn.processors.train_removal import epoch_reporter, load_takes, read_truths, validation_names
@@ -20,7 +19,7 @@ from facedyn.progress import Progress
 def train_synthesis_command(args) -> dict:
     from facedyn.dynamics.face import FaceSetup
     from facedyn.dynamics.modelfile import load_model, save_model
-    from facedyn.dynamics.skull_motion import PAPER
+    from facedyn.dynamics.skull_motion import NAMED
     from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
     from facedyn.dynamics.training import Take
     from facedyn.usd.errors import TakeError
@@ -40,9 +39,8 @@ def train_synthesis_command(args) -> dict:
         if quasistatic.kind != "removal":
             raise TakeError(f"{args.quasistatic}: a {quasistatic.kind} model; --quasistatic needs a removal model or 'truth'")
         face = quasistatic.face  # H uses F's samples and landmarks
-    config = synthesis_config(epochs=args.epochs, validation=validation_names(args.validation), seed=args.seed, device=args.device)
-    if args.skull_features == "velocity":
-        config = replace(config, skull_motion=PAPER)
+    config = synthesis_config(epochs=args.epochs, validation=validation_names(args.validation), seed=args.seed, device=args.device,
+                              skull_motion=NAMED[args.skull_features])
     read_seconds = time.perf_counter() - started
     on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
     model = train_synthesis([Take.from_performance(perf, name) for name, perf in takes], face, first.uvs,

@@ -213,14 +213,18 @@ def protocol(
         for kind in motions:
             take_seed += 1
             label = expression or "neutral"
-            name = f"{label}_{kind.replace(':', '')}" + ("hz" if kind.startswith("platform") else "")
-            specs.append(TakeSpec(name, kind, expression, duration_s=duration, seed=take_seed, noise_cm=noise_cm))
+            specs.append(TakeSpec(f"{label}_{motion_label(kind)}", kind, expression, duration_s=duration, seed=take_seed, noise_cm=noise_cm))
             if expression is None and scale == "standard":
                 break  # the neutral is captured once, standing still
     specs += dialog_takes(data_dir, dialog_s, seed + 1000, noise_cm)
     if scale == "standard":
         specs += performance_takes(data_dir, motions, duration, seed + 2000, noise_cm)
     return specs
+
+
+def motion_label(kind: str) -> str:
+    """A protocol motion as it reads in take names: walk, platform9hz."""
+    return kind.replace(":", "") + ("hz" if kind.startswith("platform") else "")
 
 
 def dialog_takes(data_dir: Path | None, duration_s: float, seed: int, noise_cm: float) -> list[TakeSpec]:
@@ -248,7 +252,6 @@ def performance_takes(data_dir: Path | None, motions, duration_s: float, seed: i
     specs = []
     for csv in PERFORMANCES:
         for kind in motions:
-            name = f"dialog_{Path(csv).stem.replace('-', '_')}_{kind.replace(':', '')}" + ("hz" if kind.startswith("platform") else "")
-            specs.append(TakeSpec(name, kind, dialog=str(data_dir / "livelink-face" / csv), duration_s=duration_s,
+            specs.append(TakeSpec(f"dialog_{Path(csv).stem.replace('-', '_')}_{motion_label(kind)}", kind, dialog=str(data_dir / "livelink-face" / csv), duration_s=duration_s,
                                   seed=seed + len(specs), noise_cm=noise_cm))
     return specs
