@@ -26,12 +26,9 @@ whole mesh) as a fraction of the true dynamics' RMS:
 from __future__ import annotations
 
 import argparse
-import atexit
 import itertools
 import json
 import os
-import shutil
-import tempfile
 import time
 from pathlib import Path
 
@@ -40,16 +37,16 @@ import torch
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.removal import remove_dynamics
-from facedyn.dynamics.skull_motion import SkullMotionInput
+from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
 from facedyn.dynamics.targets import dynamic_offsets
 from facedyn.dynamics.training import TARGETS, Take, TrainConfig, train_removal
 from facedyn.cli import _load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, SPEECH, TakeSpec, held_expressions, simulate_takes
+from spill import scratch_folder, spill
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 NOISE_CM = 0.01
-SKULL_INPUTS = {"velocity": None, "acceleration": SkullMotionInput()}  # None: the paper's B(t)
 MOTIONS = ["walk", "run", "hop"] + [f"platform:{hz}" for hz in PLATFORM_HZ]
 
 
@@ -79,18 +76,13 @@ class Kept:
         self.name = take.spec.name
         self.fps = take.fps
         self.translate, self.orient = take.skull_translate, take.skull_orient
-        self.captured = _spill(store / f"{self.name}.captured.npy", take.captured)
-        self.dynamics = _spill(store / f"{self.name}.dynamics.npy", take.offsets)
+        self.captured = spill(store / f"{self.name}.captured.npy", take.captured)
+        self.dynamics = spill(store / f"{self.name}.dynamics.npy", take.offsets)
         fv = face_vertices
         self.noise = (take.captured[:, fv] - take.quasistatic[:, fv] - take.offsets[:, fv]) if test else None
 
     def as_take(self) -> Take:
         return Take(self.name, self.captured, self.fps, self.translate, self.orient, "skull", self.dynamics)
-
-
-def _spill(path: Path, array: np.ndarray) -> np.ndarray:
-    np.save(path, array)
-    return np.load(path, mmap_mode="r")
 
 
 def evaluate(model, group: list[Kept], face_vertices) -> dict:
@@ -131,7 +123,7 @@ def main() -> None:
     parser.add_argument("--skull-features", nargs="+", choices=tuple(SKULL_INPUTS), default=["velocity"],
                         help="F's skull inputs to compare: the paper's velocities (default) and/or facedyn's accelerations")
     parser.add_argument("--performances", type=int, default=4, choices=range(len(PERFORMANCES) + 1), metavar=f"0..{len(PERFORMANCES)}",
-                        help="Live Link performances (not the test's) captured under every training motion, for truth targets (default 4)")
+                        help="Live Link performances (not the test's) captured under every training motion, for truth targets (default 4, the speech takes: the measured configuration)")
     args = parser.parse_args()
     torch.set_num_threads(os.cpu_count() or 1)
     rig = _load_rig(args.rig, None)  # the built-in face without --rig
@@ -139,8 +131,7 @@ def main() -> None:
     fv = rig.face_vertices
     started = time.perf_counter()
     specs = corpus_specs(rig, args.expressions, args.seconds, args.performances)
-    store = Path(tempfile.mkdtemp(prefix="facedyn-bench-"))
-    atexit.register(shutil.rmtree, store, ignore_errors=True)
+    store = scratch_folder()
     takes = {t.spec.name: Kept(t, fv, t.spec.motion.startswith(("platform", "bvh")), store)
              for t in simulate_takes(rig, specs, jobs=os.cpu_count() or 1)}
     print(json.dumps({"case": "corpus", "rig": rig.name, "takes": len(takes), "frames": sum(len(t.captured) for t in takes.values()),

@@ -9,7 +9,8 @@ the head's pose, facedyn.sim.tissue) and the offsets (the dynamics: what motion 
 Protocol (papers/000): per actor, neutral + 10 held expressions, each under stillness,
 walking, running, hopping and a platform at 6..11 Hz, about 3 s at 120 fps; plus dialog
 takes (Live Link curves): speech under real walking and hopping head motion (CMU), and at
-the standard scale four other performances under every protocol motion.
+the standard scale six other performances (four speech, two range of motion) under every
+protocol motion.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from facedyn.sim.tissue import TissueParams, simulate
 
 PLATFORM_HZ = (6, 7, 8, 9, 10, 11)
 SPEECH = "MySlate_3_Jason_Millers_iPhone.csv"  # Live Link speech of the dialog test takes
-PERFORMANCES = ("S07-001.csv", "S88-001.csv", "apfel.csv", "facial.csv")  # other Live Link performances, for training
+PERFORMANCES = ("S07-001.csv", "S88-001.csv", "apfel.csv", "facial.csv", "alex_rom_3.csv", "alex_rom_4.csv")  # other Live Link performances (speech, then range of motion), for training
 PLATFORM_AMPLITUDE_CM = 0.15  # 0.73 g at 11 Hz: about 5 mm peak offsets, as in the paper
 MOTIONS = ("still", "walk", "run", "hop") + tuple(f"platform:{hz}" for hz in PLATFORM_HZ)
 
