@@ -72,8 +72,7 @@ class Actor:
     tissue: TissueParams
     face: FaceSetup
     removal: dict | None = None  # {"F": the paper's F, "Ftruth": F on true dynamics (actor A)}
-    synthesis: dict | None = None  # {"<F|truth>_<skull input>": H trained on F's or the true quasistatic}
-    seconds: dict | None = None
+    synthesis: dict | None = None  # {"<F|Ftruth|truth>_<skull input>": H on that F's output or on the true quasistatic}
 
 
 def emit(**fields) -> None:

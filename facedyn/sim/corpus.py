@@ -26,7 +26,8 @@ from facedyn.sim.tissue import TissueParams, simulate
 
 PLATFORM_HZ = (6, 7, 8, 9, 10, 11)
 SPEECH = "MySlate_3_Jason_Millers_iPhone.csv"  # Live Link speech of the dialog test takes
-PERFORMANCES = ("S07-001.csv", "S88-001.csv", "apfel.csv", "facial.csv", "alex_rom_3.csv", "alex_rom_4.csv")  # other Live Link performances (speech, then range of motion), for training
+# other Live Link performances, for training: four speech takes, two range-of-motion sessions
+PERFORMANCES = ("S07-001.csv", "S88-001.csv", "apfel.csv", "facial.csv", "alex_rom_3.csv", "alex_rom_4.csv")
 PLATFORM_AMPLITUDE_CM = 0.15  # 0.73 g at 11 Hz: about 5 mm peak offsets, as in the paper
 MOTIONS = ("still", "walk", "run", "hop") + tuple(f"platform:{hz}" for hz in PLATFORM_HZ)
 
