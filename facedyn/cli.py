@@ -31,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     debug = "--debug" in argv
     try:
-        import facedyn  # noqa: F401  (registers the USD plugins; fails with a clear message if it cannot)
+        import facedyn.usd  # noqa: F401  (registers the USD plugins; fails with a clear message if it cannot)
     except Exception as exc:
         print(f"usdfacedyn: error: {exc}", file=sys.stderr)
         return EXIT_FAILURE
@@ -346,10 +346,9 @@ def _load_rig(path: Path | None, actor_seed: int | None):
 
 def _version_text() -> str:
     import facedyn
-    from pxr import Usd
+    from facedyn.usd.plugin import usd_version
 
-    major, minor, patch = Usd.GetVersion()
-    return f"usdfacedyn {facedyn.__version__} (USD {minor}.{patch:02d})"
+    return f"usdfacedyn {facedyn.__version__} (USD {usd_version()})"
 
 
 if __name__ == "__main__":

@@ -129,7 +129,7 @@ class Demo:
     def synthesize(self, root, take_dir, truth, rig, corpus, models):
         from facedyn.evaluation import residual_fraction
         from facedyn.processors.train_synthesis import train_synthesis_command
-        from facedyn.sim import motion
+        from facedyn import motion
         from facedyn.sim.tissue import simulate
         from facedyn.usd.take import read_take
 

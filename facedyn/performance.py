@@ -1,4 +1,5 @@
-"""The in-memory form of a take: plain NumPy arrays, no pxr.
+"""facedyn's data model, as plain NumPy arrays (no pxr): a take (`Performance`), a skull
+trajectory, the layer roles and the kernel backend names.
 
 Every algorithm in facedyn works on a `Performance` (or on the arrays it holds) and never
 on a USD stage; `facedyn.usd.take` converts between the two.
@@ -19,7 +20,61 @@ import numpy as np
 
 from facedyn.geometry import quaternion
 
-ROLES = ("captured", "stabilized", "quasistatic", "synthesized", "retargeted")
+BACKENDS = ("auto", "opencl", "numpy")
+"""Kernel backends: OpenCL where a device exists, the NumPy twins, or the machine's choice."""
+
+
+@dataclass(frozen=True)
+class Role:
+    """What a layer's points are, and where that layer sits in a take's stack.
+
+    A processor writes one role and reads the take composed from the layers of lower rank
+    only, so whatever lies above it (results built on an earlier run) never feeds back.
+    Roles of equal rank are variants: several may be stacked (synthesized.hop,
+    synthesized.walk), the strongest shows.
+    """
+
+    name: str  # the token authored as facedyn:face:role and recorded in customLayerData
+    rank: int  # position in the stack: a higher rank sits above (stronger)
+    label: str  # what a menu calls the layers of this role
+    variants: bool = False  # several layers of this role may coexist
+    face_role: bool = True  # False: an overlay (e.g. heat maps) that leaves the face's role alone
+
+
+BUILTIN_ROLES = (
+    Role("captured", 0, "capture"),
+    Role("stabilized", 10, "stabilized layers"),
+    Role("quasistatic", 20, "quasistatic layers"),
+    Role("synthesized", 30, "synthesized layers", variants=True),
+    Role("retargeted", 30, "retargeted layers", variants=True),
+    Role("preview", 40, "heat map", variants=True, face_role=False),
+)
+ROLE_GROUP = "facedyn.roles"
+"""Entry-point group through which third parties add roles (each entry point a `Role`)."""
+
+
+def roles() -> dict[str, Role]:
+    """Every known role by name, weakest first: the built-in ones and third parties'."""
+    from importlib.metadata import entry_points
+
+    found = {role.name: role for role in BUILTIN_ROLES}
+    for entry_point in entry_points(group=ROLE_GROUP):
+        role = entry_point.load()
+        if not isinstance(role, Role):
+            raise TypeError(f"entry point {entry_point.value} in {ROLE_GROUP} is not a facedyn Role")
+        found.setdefault(role.name, role)
+    return dict(sorted(found.items(), key=lambda item: item[1].rank))
+
+
+def role(name: str) -> Role:
+    """The role called `name`, or a ValueError listing the known ones."""
+    known = roles()
+    if name not in known:
+        raise ValueError(f"unknown role {name!r}; known: {', '.join(known)}")
+    return known[name]
+
+
+FACE_ROLES = tuple(r.name for r in BUILTIN_ROLES if r.face_role)
 
 
 @dataclass
@@ -94,8 +149,8 @@ class Performance:
             raise ValueError(f"points must be (frames, points, 3), got {self.points.shape}")
         if len(self.frames) != len(self.points):
             raise ValueError(f"{len(self.frames)} frame numbers for {len(self.points)} frames of points")
-        if self.role not in ROLES:
-            raise ValueError(f"role must be one of {ROLES}, got {self.role!r}")
+        if self.role not in FACE_ROLES and self.role not in roles():
+            raise ValueError(f"role must be one of {', '.join(roles())}, got {self.role!r}")
 
     @property
     def frame_count(self) -> int:
@@ -124,3 +179,42 @@ class Performance:
     def with_changes(self, **changes) -> "Performance":
         return replace(self, **changes)
 
+
+@dataclass(frozen=True, eq=False)
+class SkullTrajectory:
+    """Rigid skull motion sampled at `fps` from time 0: translate (F,3) cm, orient (F,4) wxyz."""
+
+    translate: np.ndarray
+    orient: np.ndarray
+    fps: float
+
+    def __post_init__(self) -> None:
+        translate = np.array(self.translate, dtype=np.float64)
+        orient = np.array(self.orient, dtype=np.float64)
+        if translate.ndim != 2 or translate.shape[1] != 3 or len(translate) == 0:
+            raise ValueError(f"translate must be (frames >= 1, 3), got {translate.shape}")
+        if orient.shape != (len(translate), 4):
+            raise ValueError(f"orient must be ({len(translate)}, 4) to match translate, got {orient.shape}")
+        if not (np.isfinite(translate).all() and np.isfinite(orient).all()):
+            raise ValueError("translate and orient must be finite")
+        norms = np.linalg.norm(orient, axis=1)
+        if np.abs(norms - 1.0).max() > 1e-6:
+            raise ValueError(f"orient must hold unit quaternions, norms range {norms.min():.6g}..{norms.max():.6g}")
+        fps = float(self.fps)
+        if not (np.isfinite(fps) and fps > 0):
+            raise ValueError(f"fps must be positive, got {self.fps}")
+        orient /= norms[:, None]
+        translate.flags.writeable = False
+        orient.flags.writeable = False
+        object.__setattr__(self, "translate", translate)
+        object.__setattr__(self, "orient", orient)
+        object.__setattr__(self, "fps", fps)
+
+    @property
+    def frame_count(self) -> int:
+        return self.translate.shape[0]
+
+    @property
+    def times(self) -> np.ndarray:
+        """(F,) seconds of each frame."""
+        return np.arange(self.frame_count) / self.fps

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import facedyn  # noqa: F401  (registers the USD plugins before any stage is opened)
+import facedyn.usd  # noqa: F401  (registers the USD plugins before any stage is opened)
 from usd_fixtures import grid_mesh, write_mesh_cache
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"

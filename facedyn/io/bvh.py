@@ -1,7 +1,7 @@
 """BVH motion capture: hierarchy, channels and forward kinematics vectorized over frames.
 
 facedyn reads BVH files for real skull trajectories: the head of a walking or hopping
-performer moves exactly the way that makes a face jiggle (see facedyn.sim.motion).
+performer moves exactly the way that makes a face jiggle (see facedyn.motion).
 
 Conventions (the common reading of BVH, as in the CMU conversions):
 - a joint's local transform translates by OFFSET plus its position channels, then rotates
@@ -19,7 +19,7 @@ import numpy as np
 
 from facedyn.geometry import quaternion
 from facedyn.io.errors import InputError, read_lines
-from facedyn.sim.motion import SkullTrajectory
+from facedyn.performance import SkullTrajectory
 
 CMU_UNIT_CM = 5.64
 """Centimetres per BVH unit in the CMU database: its "scaled inches" (1 unit = 1/0.45 in)."""

@@ -1,5 +1,5 @@
 """Resampling onto regular frame grids: expression curves here, and the time grid and
-interval lookup that skull trajectory resampling (facedyn.sim.motion.resample) shares.
+interval lookup that skull trajectory resampling (facedyn.motion.resample) shares.
 
 Captured curves come at the phone's rate (30 or 60 fps, with dropped rows); the simulator
 and the takes run at the capture rate (96-128 fps), so curves are resampled onto its grid.

@@ -10,8 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.errors import UsageError
-from facedyn.sim import motion
-from facedyn.sim.corpus import PLATFORM_AMPLITUDE_CM
+from facedyn import motion
 
 PROCEDURAL = ("still", "walk", "run", "hop")
 
@@ -32,7 +31,7 @@ def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head",
             hz = float(arg.lower().removesuffix("hz"))
         except ValueError:
             raise UsageError(f"platform motion needs a frequency, e.g. platform:9hz, got {source!r}") from None
-        trajectory = motion.platform(hz, PLATFORM_AMPLITUDE_CM, duration_s=duration, fps=fps, seed=seed)
+        trajectory = motion.platform(hz, motion.PLATFORM_AMPLITUDE_CM, duration_s=duration, fps=fps, seed=seed)
         return _fit(trajectory, frame_count, source)
     path = Path(source)
     if not path.exists():

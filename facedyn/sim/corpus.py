@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.geometry import quaternion
-from facedyn.sim import motion
+from facedyn import motion
 from facedyn.sim.rig import FaceRig
 from facedyn.sim.tissue import TissueParams, simulate
 
@@ -28,7 +28,6 @@ PLATFORM_HZ = (6, 7, 8, 9, 10, 11)
 SPEECH = "MySlate_3_Jason_Millers_iPhone.csv"  # Live Link speech of the dialog test takes
 # other Live Link performances, for training: four speech takes, two range-of-motion sessions
 PERFORMANCES = ("S07-001.csv", "S88-001.csv", "apfel.csv", "facial.csv", "alex_rom_3.csv", "alex_rom_4.csv")
-PLATFORM_AMPLITUDE_CM = 0.15  # 0.73 g at 11 Hz: about 5 mm peak offsets, as in the paper
 MOTIONS = ("still", "walk", "run", "hop") + tuple(f"platform:{hz}" for hz in PLATFORM_HZ)
 
 # Held expressions as shape-weight recipes, tried in order; a rig gets the first ten whose
@@ -63,7 +62,7 @@ class TakeSpec:
     fps: float = 120.0
     seed: int = 0
     noise_cm: float = 0.0
-    platform_amplitude_cm: float = PLATFORM_AMPLITUDE_CM
+    platform_amplitude_cm: float = motion.PLATFORM_AMPLITUDE_CM
 
 
 @dataclass

@@ -61,3 +61,11 @@ def register_plugins() -> None:
             f"{', '.join(missing)}. Import facedyn before anything opens a stage, or set "
             f"PXR_PLUGINPATH_NAME={plugin_root()} first (`usdfacedyn env` prints the lines)"
         )
+
+
+def usd_version() -> str:
+    """USD's version as its releases name it (e.g. 26.11)."""
+    from pxr import Usd
+
+    _, minor, patch = Usd.GetVersion()
+    return f"{minor}.{patch:02d}"

@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 from facedyn.geometry import quaternion
 from facedyn.io import bvh
 from facedyn.io.errors import InputError
-from facedyn.sim import motion
+from facedyn import motion
 
 # Root: positions interleaved with a ZXY rotation; Spine: YXZ plus a position channel;
 # Head: a single Z rotation; Arm (after the Spine subtree): X rotation and Z position.

@@ -71,7 +71,7 @@ def test_plugins_are_found_through_the_package():
 
 
 def test_late_registration_is_a_clear_error():
-    code = "from pxr import Usd; Usd.SchemaRegistry().FindAppliedAPIPrimDefinition('GeomModelAPI'); import facedyn"
+    code = "from pxr import Usd; Usd.SchemaRegistry().FindAppliedAPIPrimDefinition('GeomModelAPI'); import facedyn.usd"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={"PATH": "/usr/bin:/bin"})
     assert result.returncode != 0
     assert "schema registry was built before facedyn registered its plugins" in result.stderr
@@ -82,7 +82,7 @@ def test_plugin_path_from_environment_also_works():
     import os
 
     env = dict(os.environ, PXR_PLUGINPATH_NAME=str(plugin.plugin_root()))
-    code = "from pxr import Usd; Usd.SchemaRegistry(); import facedyn; print('ok')"
+    code = "from pxr import Usd; Usd.SchemaRegistry(); import facedyn.usd; print('ok')"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert result.returncode == 0 and "ok" in result.stdout, result.stderr
 

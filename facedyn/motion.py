@@ -1,6 +1,6 @@
 """Skull motion sources: procedural gaits, a vibrating platform, stillness and mocap.
 
-The soft-tissue simulator needs skull trajectories with realistic accelerations, because
+Synthesis, retargeting and the soft-tissue simulator need skull trajectories with realistic accelerations, because
 they are what make a face jiggle. Every source returns a `SkullTrajectory`
 (``world = R(orient) @ skull + translate``, cm, Y up, the skull facing +Z at the identity
 like the face rig), sampled at ``fps`` from time 0, ``round(duration_s * fps)`` frames.
@@ -25,50 +25,15 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from facedyn.geometry import quaternion
+from facedyn.io.bvh import head_trajectory
 from facedyn.io.resample import bracket, time_grid
+from facedyn.performance import SkullTrajectory
 
 G_CM_S2 = 980.665
 """Standard gravity in cm/s^2."""
 
-
-@dataclass(frozen=True, eq=False)
-class SkullTrajectory:
-    """Rigid skull motion sampled at `fps` from time 0: translate (F,3) cm, orient (F,4) wxyz."""
-
-    translate: np.ndarray
-    orient: np.ndarray
-    fps: float
-
-    def __post_init__(self) -> None:
-        translate = np.array(self.translate, dtype=np.float64)
-        orient = np.array(self.orient, dtype=np.float64)
-        if translate.ndim != 2 or translate.shape[1] != 3 or len(translate) == 0:
-            raise ValueError(f"translate must be (frames >= 1, 3), got {translate.shape}")
-        if orient.shape != (len(translate), 4):
-            raise ValueError(f"orient must be ({len(translate)}, 4) to match translate, got {orient.shape}")
-        if not (np.isfinite(translate).all() and np.isfinite(orient).all()):
-            raise ValueError("translate and orient must be finite")
-        norms = np.linalg.norm(orient, axis=1)
-        if np.abs(norms - 1.0).max() > 1e-6:
-            raise ValueError(f"orient must hold unit quaternions, norms range {norms.min():.6g}..{norms.max():.6g}")
-        fps = float(self.fps)
-        if not (np.isfinite(fps) and fps > 0):
-            raise ValueError(f"fps must be positive, got {self.fps}")
-        orient /= norms[:, None]
-        translate.flags.writeable = False
-        orient.flags.writeable = False
-        object.__setattr__(self, "translate", translate)
-        object.__setattr__(self, "orient", orient)
-        object.__setattr__(self, "fps", fps)
-
-    @property
-    def frame_count(self) -> int:
-        return self.translate.shape[0]
-
-    @property
-    def times(self) -> np.ndarray:
-        """(F,) seconds of each frame."""
-        return np.arange(self.frame_count) / self.fps
+PLATFORM_AMPLITUDE_CM = 0.15
+"""The vibrating platform's amplitude: 0.73 g at 11 Hz, about 5 mm peak offsets, as in the paper."""
 
 
 @dataclass(frozen=True)
@@ -193,7 +158,6 @@ def from_bvh(path: str | PathLike, joint: str = "Head", duration_s: float | None
     start when `seed` is None, else from a start drawn from `seed`; `lowpass_hz` filters
     the capture first (None: raw).
     """
-    from facedyn.io.bvh import head_trajectory  # deferred: io.bvh imports SkullTrajectory from here
 
     trajectory = head_trajectory(path, joint, units_to_cm, rest_forward, rest_up)
     if lowpass_hz is not None:

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from facedyn.geometry import quaternion
-from facedyn.sim import motion
+from facedyn import motion
 
-DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 G = motion.G_CM_S2
 
 
@@ -212,7 +212,7 @@ def test_from_bvh_windows_and_resamples():
 
 
 def test_lowpass_keeps_gait_and_removes_jitter():
-    from facedyn.sim.motion import lowpass
+    from facedyn.motion import lowpass
 
     walking = motion.walk(duration_s=3.0, fps=120.0, seed=1)
     smoothed = lowpass(walking, 10.0)
