@@ -40,7 +40,7 @@ from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
 from facedyn.dynamics.targets import dynamic_offsets
 from facedyn.dynamics.training import TARGETS, Take, TrainConfig, train_removal
-from facedyn.cli import _load_rig
+from facedyn.processors.synth import load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, SPEECH, TakeSpec, held_expressions, simulate_takes
 from spill import scratch_folder, spill
@@ -126,7 +126,7 @@ def main() -> None:
                         help="Live Link performances (not the test's) captured under every training motion, for truth targets (default 4, the speech takes: the measured configuration)")
     args = parser.parse_args()
     torch.set_num_threads(os.cpu_count() or 1)
-    rig = _load_rig(args.rig, None)  # the built-in face without --rig
+    rig = load_rig(args.rig)  # the built-in face without --rig
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices)
     fv = rig.face_vertices
     started = time.perf_counter()

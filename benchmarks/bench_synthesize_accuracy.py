@@ -52,7 +52,7 @@ from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
 from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
 from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
 from facedyn.dynamics.training import Take, TrainConfig, train_removal
-from facedyn.cli import _load_rig
+from facedyn.processors.synth import load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, TakeSpec, held_expressions, simulate_take, simulate_takes
 from facedyn.sim.tissue import TissueParams, simulate
@@ -226,7 +226,7 @@ def main() -> None:
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU hopping) is needed for the dialog and hop cases")
     torch.set_num_threads(os.cpu_count() or 1)
-    rig = _load_rig(args.rig, None)  # the built-in face without --rig
+    rig = load_rig(args.rig)  # the built-in face without --rig
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices)
     a = Actor("A", rig, TissueParams(), face)
     dialog_hop = simulate_take(rig, TakeSpec("dialog_cmu_hop", f"bvh:{HOP}", dialog=str(SPEECH), duration_s=5.0, seed=4243, noise_cm=NOISE_CM))

@@ -32,7 +32,7 @@ truth = read_truth(take)
 print(f"{'method':<14}{'median solve error (cm)':>26}{'median vertex error vs truth (cm)':>36}")
 for method, layer in (("mode-pursuit", "stabilized.usdc"), ("three-point", "three_point.usdc")):
     report = json.loads((work / f"stabilize.{method}.json").read_text())
-    solve = report["summary"]["median solve error (cm)"]
+    solve = report["summary"]["median_solve_error_cm"]
     # Compose the solved layer over the capture in memory (the three-point layer is not attached).
     root = Sdf.Layer.CreateAnonymous(".usda")
     root.subLayerPaths = [str(take / layer), str(take / "capture.usdc")]

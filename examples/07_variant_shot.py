@@ -30,7 +30,7 @@ def main(argv: list[str]) -> int:
     # The layers this example switches between: stabilized, quasistatic, synthesized.hop.
     subprocess.run(["bash", str(EXAMPLES / "_setup.sh"), str(work), "synthesized"], check=True)
 
-    import facedyn  # noqa: F401  (registers facedyn's schemas before the first stage opens)
+    import facedyn.usd  # noqa: F401  (registers facedyn's schemas before the first stage opens)
     from pxr import Sdf, Usd, UsdGeom
 
     from facedyn.usd.shot import write_variant_shot

@@ -52,7 +52,7 @@ take_stack() {
 import sys
 from pathlib import Path
 from pxr import Sdf
-import facedyn  # noqa: F401  (registers the schemas)
+import facedyn.usd  # noqa: F401  (registers the schemas)
 from facedyn.usd.layers import write_take_root
 from facedyn.usd.timing import Timing
 

@@ -8,12 +8,12 @@
    motion and under a new motion (hopping), which is also simulated for the truth;
 6. write the layered take, a contact sheet and EXR uv offset maps, and print a summary.
 
-Every step goes through the same processors and commands as the CLI, so the take's root
-layer ends up with the stack: synthesized.hop -> quasistatic -> stabilized -> capture.
+Every step goes through the same processors as the CLI (facedyn.processors.runner), so the
+take's root layer ends up with the stack: synthesized.hop -> quasistatic -> stabilized ->
+capture. The demo is itself a processor (it writes a folder), registered as `demo`.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import facedyn
+from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.progress import Progress
 
 SCALES = {
@@ -54,12 +55,12 @@ class Demo:
         return value
 
     def run(self) -> dict:
-        from facedyn.cli import _load_rig
+        from facedyn.processors.synth import load_rig
         from facedyn.sim.corpus import TakeSpec, protocol, simulate_take
         from facedyn.usd.corpus import build_corpus, write_simulated_take
 
         self.output.mkdir(parents=True, exist_ok=True)
-        rig = self.step("load rig", lambda: _load_rig(self.rig_path, None))
+        rig = self.step("load rig", lambda: load_rig(self.rig_path))
         corpus = self.output / "corpus"
         specs = protocol(rig, self.settings["corpus"], self.data, seed=0, noise_cm=NOISE_CM)
         description = {"scale": self.scale, "rig": rig.name, "points": rig.point_count, "takes": [s.name for s in specs], "noise_cm": NOISE_CM}
@@ -83,10 +84,10 @@ class Demo:
 
     def process(self, processor_name: str, inputs: list[Path], output: Path, attach: Path | None = None, **params) -> dict:
         from facedyn.processors import registry
-        from facedyn.processors.base import Request
         from facedyn.processors.runner import execute
 
-        return execute(registry.load(processor_name), Request(list(inputs), output, params=params), Progress.silent(), attach_to=attach)
+        request = Request(list(inputs), output, params=params, attach=attach)
+        return execute(registry.load(processor_name), request, Progress.silent())
 
     def stabilize(self, root, take_dir, truth, rig):
         from facedyn.evaluation import stabilization_errors
@@ -108,13 +109,12 @@ class Demo:
 
     def remove(self, root, take_dir, truth, rig, corpus, models):
         from facedyn.evaluation import residual_fraction
-        from facedyn.processors.train_removal import train_removal_command
         from facedyn.usd.take import read_take
 
         model = models / "actor.removal"
-        args = _command_line("train-removal", corpus, "-o", model, "--skull", "truth", "--epochs", self.settings["f_epochs"],
-                             "--subsample", self.settings["f_subsample"], "--exclude", "dialog*")
-        report = self.step("train removal network F", lambda: train_removal_command(args))
+        report = self.step("train removal network F", lambda: self.process(
+            "train-removal", [corpus], model, skull="truth", epochs=self.settings["f_epochs"],
+            subsample=self.settings["f_subsample"], exclude="dialog*"))["summary"]
         self.step("remove dynamics", lambda: self.process("remove", [root], take_dir / "quasistatic.usdc", root, model=str(model)))
         removed, _ = read_take(root)
         self.removed = removed
@@ -127,16 +127,15 @@ class Demo:
         }
 
     def synthesize(self, root, take_dir, truth, rig, corpus, models):
-        from facedyn.evaluation import residual_fraction
-        from facedyn.processors.train_synthesis import train_synthesis_command
         from facedyn import motion
+        from facedyn.evaluation import residual_fraction
         from facedyn.sim.tissue import simulate
         from facedyn.usd.take import read_take
 
         model = models / "actor.synthesis"
-        args = _command_line("train-synthesis", corpus, "-o", model, "--quasistatic", models / "actor.removal", "--skull", "truth",
-                             "--epochs", self.settings["h_epochs"], "--exclude", "dialog*")
-        report = self.step("train synthesis network H", lambda: train_synthesis_command(args))
+        report = self.step("train synthesis network H", lambda: self.process(
+            "train-synthesis", [corpus], model, quasistatic=str(models / "actor.removal"), skull="truth",
+            epochs=self.settings["h_epochs"], exclude="dialog*"))["summary"]
         scratch = take_dir / "baselines"
         self.step("re-synthesize under the take's own motion",
                   lambda: self.process("synthesize", [root], scratch / "synthesized.own.usdc", model=str(model)))
@@ -183,14 +182,6 @@ class Demo:
                 "total_s": round(sum(self.timings.values()), 1)}
 
 
-def _command_line(*argv) -> argparse.Namespace:
-    """A console command's arguments exactly as usdfacedyn parses them (defaults included)."""
-    from facedyn.cli import build_parser
-
-    words = [str(word) for word in argv]
-    return build_parser(words).parse_args(words)
-
-
 def _existing_corpus(folder: Path) -> dict | None:
     """The description of a corpus an earlier demo run left in `folder`, if any."""
     index = folder / "corpus.json"
@@ -199,16 +190,9 @@ def _existing_corpus(folder: Path) -> dict | None:
 
 def _compose(*layers: Path):
     """Read the face from layers stacked in memory (strongest first), without a root on disk."""
-    from pxr import Sdf, Usd
+    from facedyn.usd.take import read_layers
 
-    from facedyn.usd.take import read_stage
-    from facedyn.usd.timing import Timing
-
-    layer = Sdf.Layer.CreateAnonymous(".usda")
-    Timing.from_layer(Sdf.Layer.FindOrOpen(str(layers[-1]))).apply(layer)
-    layer.subLayerPaths = [str(p) for p in layers]
-    perf, _ = read_stage(Usd.Stage.Open(layer), Path(layers[0]))
-    return perf
+    return read_layers(list(layers))
 
 
 def format_summary(summary: dict) -> str:
@@ -233,8 +217,28 @@ def format_summary(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def run_demo(output: Path, scale: str = "demo", rig: Path | None = None, data: Path | None = None, as_json: bool = False) -> dict:
-    progress = Progress.silent() if as_json else Progress()
-    summary = Demo(output, scale, rig, data, progress).run()
-    (Path(output) / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
-    return summary
+class DemoProcessor(Processor):
+    name = "demo"
+    version = "1"
+    summary = "run the whole pipeline on the built-in face and report errors against truth"
+    reads = Reads("nothing")
+    writes = Writes("folder", metavar="DIR", help="the output folder", default="demo-out")
+    parameters = (
+        Parameter("scale", str, "demo", "corpus and training size (demo: a few minutes)", tuple(SCALES)),
+        Parameter("rig", Path, None, "a UsdSkel blend-shape rig instead of the built-in face", metavar="RIG"),
+        Parameter("data", Path, None, "a ../shared/data-like folder: adds dialog takes to the corpus", metavar="DIR"),
+    )
+
+    def prepare(self, request: Request) -> Plan:
+        params = request.params
+        return Plan({"scale": params["scale"], "rig": str(params["rig"] or "built-in"), "output": str(request.output)}, request)
+
+    def run(self, plan: Plan, progress: Progress) -> FolderOutput:
+        request = plan.state
+        params = request.params
+        summary = Demo(request.output, params["scale"], params["rig"], params["data"], progress).run()
+        (Path(request.output) / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+        return FolderOutput(summary)
+
+    def describe(self, report: dict) -> str:
+        return format_summary(report["summary"])

@@ -16,7 +16,7 @@ def test_the_demo_runs_end_to_end_and_beats_doing_nothing(tmp_path, capsys):
         assert main(["demo", "-o", str(tmp_path / "demo"), "--json"]) == 0
     finally:
         torch.set_num_threads(threads)
-    summary = json.loads(capsys.readouterr().out)
+    summary = json.loads(capsys.readouterr().out)["summary"]
     results = summary["results"]
     stabilize = results["stabilize"]
     assert stabilize["mode pursuit"]["median_vertex_cm"] < stabilize["three-point"]["median_vertex_cm"]

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.errors import UsageError
-from facedyn.processors.base import Parameter, Processor, Request, Result
+from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.progress import Progress
 
 CENTIMETRES = 0.01  # metersPerUnit of every facedyn take
@@ -23,29 +23,40 @@ class ImportProcessor(Processor):
     name = "import"
     version = "1"
     summary = "turn a time-sampled USD mesh or an OBJ sequence into a canonical take (capture layer + take.usda)"
-    input_metavar = "SRC"
-    many_inputs = True
+    reads = Reads("sources", metavar="SRC", help="a USD file with an animated mesh, or OBJ files (a folder, a list or a quoted pattern)")
+    writes = Writes("layer", role="captured", help="the capture layer to write (.usdc); its take root is created beside it")
     parameters = (
         Parameter("mesh", str, "", "prim path of the animated Mesh in a USD source (default: the only one)"),
-        Parameter("fps", float, 0.0, "frame rate of an OBJ sequence (required for OBJ; USD sources carry theirs)"),
-        Parameter("units", float, 1.0, "centimetres per unit of an OBJ sequence"),
-        Parameter("root", str, "", "take root to create or extend (default: take.usda beside the output)"),
+        Parameter("fps", float, 0.0, "frame rate of an OBJ sequence (required for OBJ; USD sources carry theirs)",
+                  minimum=0.0, maximum=10000.0),
+        Parameter("units", float, 1.0, "centimetres per unit of an OBJ sequence", above=0.0, maximum=1e6),
+        Parameter("root", Path, None, "take root to create or extend (default: take.usda beside the output)", metavar="ROOT"),
     )
 
-    def check(self, request: Request) -> dict:
+    def take_root(self, request: Request) -> Path:
+        """The take root this import creates or extends."""
+        root = request.params["root"]
+        return Path(root) if root else request.output.parent / "take.usda"
+
+    def prepare(self, request: Request) -> Plan:
+        if request.attach is not None:
+            raise UsageError("import creates or extends its own take root; name it with --root, not --attach")
         source = _source(request)
+        root = self.take_root(request)
         if source.kind == "usd":
             stage, mesh_prim, time_codes = _usd_source(source.paths[0], request)
-            return {"source": str(source.paths[0]), "mesh": str(mesh_prim.GetPath()), "frames": len(time_codes),
-                    "fps": stage.GetTimeCodesPerSecond(), "root": str(_root_path(request))}
+            description = {"source": str(source.paths[0]), "mesh": str(mesh_prim.GetPath()), "frames": len(time_codes),
+                           "fps": stage.GetTimeCodesPerSecond(), "root": str(root)}
+            return Plan(description, (source, request, root, (stage, mesh_prim, time_codes)))
         _require_fps(request)
-        return {"source": f"{len(source.paths)} OBJ files", "fps": request.params["fps"], "root": str(_root_path(request))}
+        description = {"source": f"{len(source.paths)} OBJ files", "fps": request.params["fps"], "root": str(root)}
+        return Plan(description, (source, request, root, None))
 
-    def run(self, request: Request, progress: Progress) -> Result:
-        source = _source(request)
-        if source.kind == "usd":
-            return _import_usd(source.paths[0], request, progress)
-        return _import_obj(source.paths, request, progress)
+    def run(self, plan: Plan, progress: Progress) -> LayerOutput:
+        source, request, root, usd = plan.state
+        output = _import_usd(source.paths[0], usd, request, progress) if source.kind == "usd" else _import_obj(source.paths, request, progress)
+        output.root = root
+        return output
 
 
 class _Source:
@@ -69,11 +80,6 @@ def _source(request: Request) -> _Source:
     if len(paths) == 1:
         return _Source("usd", paths)
     raise UsageError("import takes one USD file, or OBJ files (a folder, or a list such as face.*.obj)")
-
-
-def _root_path(request: Request) -> Path:
-    root = request.params["root"]
-    return Path(root) if root else request.output.parent / "take.usda"
 
 
 def _require_fps(request: Request) -> float:
@@ -105,7 +111,7 @@ def _usd_source(path: Path, request: Request):
     return stage, mesh_prim, select_time_codes(stage, mesh_prim, request.frames)
 
 
-def _import_usd(path: Path, request: Request, progress: Progress) -> Result:
+def _import_usd(path: Path, usd, request: Request, progress: Progress) -> LayerOutput:
     from facedyn.usd import schema
     from facedyn.usd.layers import LayerContent
     from facedyn.usd.stage import layer_name
@@ -113,7 +119,7 @@ def _import_usd(path: Path, request: Request, progress: Progress) -> Result:
     from facedyn.usd.timing import Timing
     from pxr import Usd, UsdGeom
 
-    stage, mesh_prim, time_codes = _usd_source(path, request)
+    stage, mesh_prim, time_codes = usd
     where = f"{layer_name(stage)}: {mesh_prim.GetPath()}"
     mesh = UsdGeom.Mesh(mesh_prim)
     topology = read_topology(mesh, where)
@@ -139,11 +145,11 @@ def _import_usd(path: Path, request: Request, progress: Progress) -> Result:
         skull=schema.SkullAttributes(solver="identity"),
     )
     out_timing = Timing(timing.time_codes_per_second, timing.frames_per_second, float(time_codes[0]), float(time_codes[-1]), CENTIMETRES, "Y")
-    summary = {"source mesh": str(mesh_prim.GetPath()), "points": points.shape[1], "fps": timing.time_codes_per_second}
-    return Result(layer=layer, timing=out_timing, inputs=[str(path)], define=True, summary=summary, root=_root_path(request))
+    summary = {"source_mesh": str(mesh_prim.GetPath()), "points": points.shape[1], "fps": timing.time_codes_per_second}
+    return LayerOutput(layer=layer, timing=out_timing, inputs=[str(path)], define=True, summary=summary)
 
 
-def _import_obj(paths: list[Path], request: Request, progress: Progress) -> Result:
+def _import_obj(paths: list[Path], request: Request, progress: Progress) -> LayerOutput:
     from facedyn.io.obj import read_obj_sequence
     from facedyn.performance import Topology
     from facedyn.usd import schema
@@ -168,8 +174,8 @@ def _import_obj(paths: list[Path], request: Request, progress: Progress) -> Resu
         skull=schema.SkullAttributes(solver="identity"),
     )
     timing = Timing(fps, fps, float(frames[0]), float(frames[-1]), CENTIMETRES, "Y")
-    summary = {"obj files": len(paths), "points": points.shape[1], "fps": fps}
-    return Result(layer=layer, timing=timing, inputs=[str(p) for p in paths], define=True, summary=summary, root=_root_path(request))
+    summary = {"obj_files": len(paths), "points": points.shape[1], "fps": fps}
+    return LayerOutput(layer=layer, timing=timing, inputs=[str(p) for p in paths], define=True, summary=summary)
 
 
 def _frame_number_key(path: Path):

@@ -13,6 +13,7 @@ from facedyn.errors import UsageError
 from facedyn import motion
 
 PROCEDURAL = ("still", "walk", "run", "hop")
+MAX_PLATFORM_HZ = 100.0  # well above any tissue resonance; the simulated protocol uses 6-11 Hz
 
 
 def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head", seed: int = 0) -> tuple[np.ndarray, np.ndarray, str]:
@@ -30,7 +31,9 @@ def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head",
         try:
             hz = float(arg.lower().removesuffix("hz"))
         except ValueError:
-            raise UsageError(f"platform motion needs a frequency, e.g. platform:9hz, got {source!r}") from None
+            raise UsageError(f"--skull-motion: platform motion needs a frequency, e.g. platform:9hz, got {source!r}") from None
+        if not 0 < hz <= MAX_PLATFORM_HZ:  # NaN fails too
+            raise UsageError(f"--skull-motion: a platform frequency must lie in (0, {MAX_PLATFORM_HZ:g}] Hz, got {source!r}")
         trajectory = motion.platform(hz, motion.PLATFORM_AMPLITUDE_CM, duration_s=duration, fps=fps, seed=seed)
         return _fit(trajectory, frame_count, source)
     path = Path(source)

@@ -1,8 +1,9 @@
 """The remove processor: subtract the secondary dynamics that network F predicts.
 
-Writes the quasistatic layer: points = the quasistatic skin in skull space, and the
-removed dynamics as `primvars:facedyn:dynamicsOffset` (captured - quasistatic). The take
-must be stabilized, since F's features are velocities in the skull frame.
+Reads the stabilized take (the layers below the quasistatic role) and writes the
+quasistatic layer: points = the quasistatic skin in skull space, and the removed dynamics
+as `primvars:facedyn:dynamicsOffset` (captured - quasistatic). F's features are skull
+landmark motion in the skull frame, so the take must be stabilized.
 """
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.errors import UsageError
-from facedyn.processors.base import Parameter, Processor, Request, Result
+from facedyn.performance import BACKENDS
+from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device, single_input
 from facedyn.progress import Progress
 
 
@@ -19,53 +21,64 @@ class RemoveProcessor(Processor):
     name = "remove"
     version = "1"
     summary = "remove secondary dynamics with a trained removal model (network F)"
+    reads = Reads("take", help="the take root (reads the stabilized take below any quasistatic layer)")
+    writes = Writes("layer", role="quasistatic", help="the quasistatic layer to write (.usdc)")
     parameters = (
-        Parameter("model", str, "", "the removal model file (from train-removal)"),
-        Parameter("backend", str, "auto", "feature and Laplacian kernels: auto, opencl, numpy", ("auto", "opencl", "numpy")),
-        Parameter("device", str, "auto", "torch device for the network: auto, cpu, cuda"),
+        Parameter("model", Path, help="the removal model file (from train-removal)", metavar="MODEL"),
+        Parameter("backend", str, "auto", "feature and Laplacian kernels", BACKENDS),
+        Parameter("device", str, "auto", "torch device for the network: auto, cpu, cuda, cuda:N", check=check_device),
     )
 
-    def check(self, request: Request) -> dict:
-        perf, source, model = _inputs(request)
-        return {"take": str(request.inputs[0]), "frames": perf.frame_count, "model": request.params["model"],
-                "samples": int(len(model.face.samples))}
+    def prepare(self, request: Request) -> Plan:
+        perf, source, model = read_with_model(request, self.writes.role, "removal")
+        description = {"take": str(request.inputs[0]), "frames": perf.frame_count, "model": str(request.params["model"]),
+                       "samples": int(len(model.face.samples))}
+        return Plan(description, (perf, source, model, request.params))
 
-    def run(self, request: Request, progress: Progress) -> Result:
+    def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.dynamics.removal import remove_dynamics
         from facedyn.usd import schema
         from facedyn.usd.layers import LayerContent
 
-        perf, source, model = _inputs(request)
+        perf, source, model, params = plan.state
         translate, orient = perf.skull()
         progress.start("remove dynamics", 1)
         quasistatic, offsets = remove_dynamics(perf.points, translate, orient, perf.fps, model,
-                                               backend=request.params["backend"], device=request.params["device"])
+                                               backend=params["backend"], device=params["device"])
         progress.finish()
         layer = LayerContent(
             frames=perf.frames, mesh_path=source.mesh_path, skull_path=source.skull_path, points=quasistatic, offsets=offsets,
-            face=schema.FaceAttributes(role="quasistatic", skin_samples=model.face.samples),
+            face=schema.FaceAttributes(role=self.writes.role, skin_samples=model.face.samples),
         )
-        magnitude = np.linalg.norm(offsets, axis=-1)
-        summary = {"peak removed offset (mm)": round(float(magnitude.max()) * 10, 3),
-                   "RMS removed offset (mm)": round(float(np.sqrt(np.mean(magnitude**2))) * 10, 3)}
-        inputs = list(source.layer_identifiers) + [str(Path(request.params["model"]).resolve())]
-        return Result(layer=layer, timing=source.timing, inputs=inputs, summary=summary)
+        return LayerOutput(layer=layer, timing=source.timing, inputs=model_inputs(source, params["model"]),
+                           summary=offset_summary(offsets, "removed"))
 
 
-def _inputs(request: Request):
+def read_with_model(request: Request, role_name: str, kind: str):
+    """The take below `role_name` and a model of `kind` that fits it (topology, frame rate)."""
     from facedyn.dynamics.modelfile import load_model
     from facedyn.usd.errors import TakeError
-    from facedyn.usd.take import read_take
+    from facedyn.usd.take import read_take_below
 
-    if len(request.inputs) != 1:
-        raise UsageError("remove takes one TAKE")
-    if not request.params["model"]:
-        raise UsageError("remove needs --model MODEL (a file written by usdfacedyn train-removal)")
-    # Read the stabilized take, under any earlier removal and the variants stacked on it.
-    perf, source = read_take(request.inputs[0], frames=request.frames, mute=frozenset({"remove", "synthesize", "retarget", "preview"}))
-    if source.skull_path is None or perf.skull_orient is None or perf.role == "captured":
-        raise TakeError(f"{request.inputs[0]}: {source.mesh_path} is not stabilized; run `usdfacedyn stabilize` first")
+    path = single_input(request)
+    perf, source = read_take_below(path, role_name, frames=request.frames)
     model = load_model(request.params["model"], topology=perf.topology, fps=perf.fps)
-    if model.kind != "removal":
-        raise UsageError(f"{request.params['model']}: a {model.kind} model; remove needs a removal model (network F)")
+    if model.kind != kind:
+        raise UsageError(f"--model {request.params['model']}: a {model.kind} model; this step needs a {kind} model")
+    needed = "stabilized" if role_name == "quasistatic" else "quasistatic"
+    if perf.role != needed or source.skull_path is None:
+        step = "stabilize" if needed == "stabilized" else "remove"
+        raise TakeError(f"{path}: below its {role_name} layers {source.mesh_path} is {perf.role}, not {needed}; "
+                        f"run `usdfacedyn {step}` first")
     return perf, source, model
+
+
+def model_inputs(source, model_path: Path) -> list[str]:
+    """The provenance inputs of a layer computed from a take and a model file."""
+    return list(source.layer_identifiers) + [str(Path(model_path).resolve())]
+
+
+def offset_summary(offsets: np.ndarray, what: str) -> dict:
+    magnitude = np.linalg.norm(offsets, axis=-1)
+    return {f"peak_{what}_offset_mm": round(float(magnitude.max()) * 10, 3),
+            f"rms_{what}_offset_mm": round(float(np.sqrt(np.mean(magnitude**2))) * 10, 3)}

@@ -7,11 +7,14 @@ offsets copied onto B.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from facedyn.errors import UsageError
-from facedyn.processors.base import Parameter, Processor, Request, Result
-from facedyn.processors.synthesize import VARIANT_PROCESSORS, quasistatic_inputs, synthesized_result
+from facedyn.performance import BACKENDS
+from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device, single_input
+from facedyn.processors.synthesize import synthesized_output
 from facedyn.progress import Progress
 
 
@@ -19,60 +22,35 @@ class RetargetProcessor(Processor):
     name = "retarget"
     version = "1"
     summary = "move actor A's root motion (and dynamics) onto actor B's quasistatic performance"
+    reads = Reads("take", help="actor B's take root (reads its quasistatic take below any retargeted layer)")
+    writes = Writes("layer", role="retargeted", help="the retargeted layer to write (.usdc)")
     parameters = (
-        Parameter("source", str, "", "actor A's take: stabilized (synthesis) or with dynamics offsets (delta-transfer)"),
-        Parameter("model", str, "", "actor B's synthesis model (method synthesis)"),
+        Parameter("source", Path, help="actor A's take: stabilized (synthesis) or with dynamics offsets (delta-transfer)", metavar="TAKE"),
+        Parameter("model", Path, None, "actor B's synthesis model (method synthesis)", metavar="MODEL"),
         Parameter("method", str, "synthesis", "synthesis (B's network H) or delta-transfer (copy A's offsets)", ("synthesis", "delta-transfer")),
-        Parameter("backend", str, "auto", "stretch kernels: auto, opencl, numpy", ("auto", "opencl", "numpy")),
-        Parameter("device", str, "auto", "torch device for the network: auto, cpu, cuda"),
+        Parameter("backend", str, "auto", "stretch kernels", BACKENDS),
+        Parameter("device", str, "auto", "torch device for the network: auto, cpu, cuda, cuda:N", check=check_device),
     )
 
-    def check(self, request: Request) -> dict:
-        perf, _, _, source_perf = self._inputs(request)
-        return {"target take": str(request.inputs[0]), "source take": request.params["source"],
-                "frames": perf.frame_count, "method": request.params["method"]}
-
-    def run(self, request: Request, progress: Progress) -> Result:
-        from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
-        from facedyn.dynamics.synthesis import synthesize_dynamics
-
-        perf, source, model, a = self._inputs(request)
-        f = perf.frame_count
-        rest_a = a.rest_points if a.rest_points is not None else a.points[0]
-        rest_b = perf.rest_points if perf.rest_points is not None else perf.points[0]
-        rigid = None
-        if perf.rigid_weights is not None and np.count_nonzero(perf.rigid_weights >= 0.99) >= 3:
-            rigid = np.flatnonzero(perf.rigid_weights >= 0.99)
-        t_a, q_a = a.skull()
-        translate, orient = align_trajectory(t_a[:f], q_a[:f], rest_a, rest_b, vertices=rigid)
-        progress.start(f"retarget ({request.params['method']})", 1)
-        if request.params["method"] == "synthesis":
-            points, offsets = synthesize_dynamics(perf.points, translate, orient, perf.fps, model,
-                                                  backend=request.params["backend"], device=request.params["device"])
-        else:
-            rotation, _ = skull_correspondence(rest_a, rest_b, rigid)
-            points, offsets = delta_transfer(a.offsets[:f], perf.points, rotation)
-        progress.finish()
-        return synthesized_result(perf, source, request, points, offsets, translate, orient, "retargeted",
-                                  {"source": request.params["source"], "method": request.params["method"]})
-
-    def _inputs(self, request: Request):
+    def prepare(self, request: Request) -> Plan:
+        from facedyn.processors.remove import read_with_model
         from facedyn.usd.errors import TakeError
-        from facedyn.usd.take import read_take
+        from facedyn.usd.take import read_take_below
 
         params = request.params
-        if not params["source"]:
-            raise UsageError("retarget needs --source TAKE (actor A's take)")
         if params["method"] == "synthesis":
-            perf, source, model = quasistatic_inputs(request, "synthesis")
+            if params["model"] is None:
+                raise UsageError("--model is required with --method synthesis (actor B's synthesis model)")
+            perf, source, model = read_with_model(request, self.writes.role, "synthesis")
         else:
-            if params["model"]:
-                raise UsageError("delta-transfer uses no model; leave out --model")
-            perf, source = read_take(request.inputs[0], frames=request.frames, mute=VARIANT_PROCESSORS)
+            if params["model"] is not None:
+                raise UsageError("--model: delta-transfer uses no model; leave it out")
+            path = single_input(request)
+            perf, source = read_take_below(path, self.writes.role, frames=request.frames)
             model = None
             if perf.role != "quasistatic":
-                raise TakeError(f"{request.inputs[0]}: {source.mesh_path} is {perf.role}, not quasistatic; run `usdfacedyn remove` first")
-        a, a_source = read_take(params["source"], mute=VARIANT_PROCESSORS)
+                raise TakeError(f"{path}: {source.mesh_path} is {perf.role}, not quasistatic; run `usdfacedyn remove` first")
+        a, _ = read_take_below(params["source"], self.writes.role)
         if a.skull_orient is None:
             raise TakeError(f"{params['source']}: actor A's take has no solved skull motion (stabilize it first)")
         if a.point_count != perf.point_count:
@@ -83,4 +61,30 @@ class RetargetProcessor(Processor):
             raise TakeError(f"{params['source']}: {a.frame_count} frames for a {perf.frame_count}-frame target take")
         if params["method"] == "delta-transfer" and a.offsets is None:
             raise TakeError(f"{params['source']}: delta-transfer needs actor A's dynamics offsets (its quasistatic layer)")
-        return perf, source, model, a
+        description = {"target_take": str(request.inputs[0]), "source_take": str(params["source"]),
+                       "frames": perf.frame_count, "method": params["method"]}
+        return Plan(description, (perf, source, model, a, params))
+
+    def run(self, plan: Plan, progress: Progress) -> LayerOutput:
+        from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
+        from facedyn.dynamics.synthesis import synthesize_dynamics
+
+        perf, source, model, a, params = plan.state
+        f = perf.frame_count
+        rest_a = a.rest_points if a.rest_points is not None else a.points[0]
+        rest_b = perf.rest_points if perf.rest_points is not None else perf.points[0]
+        rigid = None
+        if perf.rigid_weights is not None and np.count_nonzero(perf.rigid_weights >= 0.99) >= 3:
+            rigid = np.flatnonzero(perf.rigid_weights >= 0.99)
+        t_a, q_a = a.skull()
+        translate, orient = align_trajectory(t_a[:f], q_a[:f], rest_a, rest_b, vertices=rigid)
+        progress.start(f"retarget ({params['method']})", 1)
+        if params["method"] == "synthesis":
+            points, offsets = synthesize_dynamics(perf.points, translate, orient, perf.fps, model,
+                                                  backend=params["backend"], device=params["device"])
+        else:
+            rotation, _ = skull_correspondence(rest_a, rest_b, rigid)
+            points, offsets = delta_transfer(a.offsets[:f], perf.points, rotation)
+        progress.finish()
+        return synthesized_output(perf, source, params["model"], points, offsets, translate, orient, self.writes.role,
+                                  {"source": str(params["source"]), "method": params["method"]})

@@ -1,72 +1,121 @@
-"""Running a processor: output checks, the run itself, atomic write, provenance, attach."""
+"""Running a processor: parameter and path checks, prepare once, run, write atomically.
+
+What happens to the output depends only on what the processor declares it writes:
+- a layer is written with its role and provenance and, with `--attach` (or an import's
+  root), placed in the take root by role, under the root's lock;
+- a model file is saved atomically;
+- a folder is removed again when the run fails and the folder did not exist before.
+"""
 from __future__ import annotations
 
+import shutil
 import time
 from pathlib import Path
 from typing import Any
 
 import facedyn
 from facedyn.errors import UsageError
-from facedyn.processors.base import Processor, Request
+from facedyn.processors.base import FolderOutput, LayerOutput, ModelOutput, Processor, Request
 from facedyn.progress import Progress
-from facedyn.usd import layers, schema
 
 
-def execute(processor: Processor, request: Request, progress: Progress, attach_to: Path | None = None, dry_run: bool = False) -> dict[str, Any]:
+def execute(processor: Processor, request: Request, progress: Progress, dry_run: bool = False) -> dict[str, Any]:
     """Run `processor` for `request`; return a JSON-able report of what was (or would be) written."""
     request.params = processor.resolve_params(request.params)
-    _check_output(request)
-    layers.check_writable(request.output)
+    request.inputs = [Path(p) for p in request.inputs]
+    request.output = Path(request.output)
+    _check_paths(processor, request)
     report: dict[str, Any] = {
         "processor": processor.name,
         "inputs": [str(p) for p in request.inputs],
         "output": str(request.output),
         "parameters": {k: _plain(v) for k, v in request.params.items()},
-        "frames": list(request.frames) if request.frames else None,
     }
-    report["plan"] = processor.check(request)
+    if processor.writes.what == "layer":
+        report["frames"] = list(request.frames) if request.frames else None
+    started = time.perf_counter()
+    plan = processor.prepare(request)
+    report["plan"] = plan.description
     if dry_run:
         report["dry_run"] = True
         return report
-    started = time.perf_counter()
-    result = processor.run(request, progress)
-    computed = time.perf_counter() - started
-    frames = result.layer.frames
-    provenance = schema.Provenance(
-        processor=processor.name,
-        version=f"facedyn {facedyn.__version__}, {processor.name} {processor.version}",
-        parameters=report["parameters"],
-        frame_range=(float(frames[0]), float(frames[-1])),
-        inputs=result.inputs,
-    )
-    layers.write_layer(request.output, result.layer, result.timing, provenance, define=result.define)
-    if result.root is not None:
-        report["root"] = str(_extend_root(result.root, request.output, result.timing))
-    if attach_to is not None:
-        report["sublayers"] = layers.attach(attach_to, request.output)
-        report["root"] = str(attach_to)
-    report.update(
-        frame_count=int(len(frames)),
-        frame_range=[float(frames[0]), float(frames[-1])],
-        seconds={"compute": round(computed, 3), "total": round(time.perf_counter() - started, 3)},
-        summary=result.summary,
-    )
+    writes = processor.writes.what
+    created_folder = writes == "folder" and not request.output.exists()
+    if writes in ("folder", "model") and not request.output.parent.exists():
+        request.output.parent.mkdir(parents=True)
+    try:
+        output = processor.run(plan, progress)
+        computed = time.perf_counter() - started
+        if isinstance(output, LayerOutput):
+            report.update(_write_layer(processor, request, output))
+        elif isinstance(output, ModelOutput):
+            report["output"] = str(_save_model(output.model, request.output))
+        elif not isinstance(output, FolderOutput):
+            raise TypeError(f"{processor.name}.run returned {type(output).__name__}, not a declared output")
+    except BaseException:
+        if created_folder and request.output.is_dir():
+            shutil.rmtree(request.output, ignore_errors=True)
+        raise
+    report["summary"] = output.summary
+    report["seconds"] = {"compute": round(computed, 3), "total": round(time.perf_counter() - started, 3)}
     return report
 
 
-def _check_output(request: Request) -> None:
+def _check_paths(processor: Processor, request: Request) -> None:
+    """Refuse outputs that would overwrite an input, or land where nothing can be written."""
     output = request.output.resolve()
     for path in request.inputs:
         if Path(path).resolve() == output:
             raise UsageError(f"{request.output}: the output would overwrite an input; choose another -o")
+    writes = processor.writes.what
+    if writes == "layer":
+        from facedyn.usd.layers import check_output_paths
+
+        check_output_paths(request.output, request.inputs, attach=request.attach,
+                           root=_import_root(processor, request), role=processor.writes.role)
+    elif request.output.is_dir() and writes == "model":
+        raise UsageError(f"{request.output}: is a folder; -o names the model file to write")
+    elif request.output.exists() and writes == "folder" and not request.output.is_dir():
+        raise UsageError(f"{request.output}: is a file; -o names the folder to write")
+    if request.attach is not None and writes != "layer":
+        raise UsageError(f"{processor.name} writes a {writes}, which cannot be attached to a take")
 
 
-def _extend_root(root: Path, layer_path: Path, timing) -> Path:
-    """Create root with layer_path as its only sublayer, or add it as the weakest of an existing root."""
-    if not root.exists():
-        return layers.write_take_root(root, [layer_path], timing)
-    layers.attach_weakest(root, layer_path)
-    return root
+def _import_root(processor: Processor, request: Request) -> Path | None:
+    root = getattr(processor, "take_root", None)
+    return root(request) if root else None
+
+
+def _write_layer(processor: Processor, request: Request, output: LayerOutput) -> dict[str, Any]:
+    from facedyn.usd import layers, schema
+
+    frames = output.layer.frames
+    provenance = schema.Provenance(
+        processor=processor.name,
+        version=f"facedyn {facedyn.__version__}, {processor.name} {processor.version}",
+        parameters={k: _plain(v) for k, v in request.params.items()},
+        frame_range=(float(frames[0]), float(frames[-1])),
+        inputs=output.inputs,
+    )
+    root = output.root or request.attach
+
+    def write():
+        layers.write_layer(request.output, output.layer, output.timing, provenance, define=output.define)
+
+    report: dict[str, Any] = {"frame_count": int(len(frames)), "frame_range": [float(frames[0]), float(frames[-1])]}
+    if root is None:
+        write()
+        return report
+    placed = layers.write_and_attach(Path(root), request.output, processor.writes.role, write, timing=output.timing,
+                                     frames=frames)
+    report.update(root=str(root), sublayers=placed.sublayers, stale=placed.stale)
+    return report
+
+
+def _save_model(model, path: Path) -> Path:
+    from facedyn.dynamics.modelfile import save_model
+
+    return save_model(model, path)
 
 
 def _plain(value: Any) -> Any:

@@ -1,59 +1,76 @@
 """The stabilize processor: solve the rigid skull motion of a take (papers/001).
 
-Writes the stabilized layer: the skull's translate + orient per frame, the skin in skull
-space, the per-frame solve error, and the rest mesh it solved against. Composed over the
-capture it reproduces the captured world-space points.
+Reads the capture (the layers below the stabilized role) and writes the stabilized layer:
+the skull's translate + orient per frame, the skin in skull space, the per-frame solve
+error, and the rest mesh it solved against. Composed over the capture it reproduces the
+captured world-space points.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from facedyn.errors import UsageError
-from facedyn.processors.base import Parameter, Processor, Request, Result
+from facedyn.performance import BACKENDS
+from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, single_input
 from facedyn.progress import Progress
 
 METHODS = ("mode-pursuit", "three-point", "procrustes", "icp")
+
+
+def _three_indices(text: str) -> str | None:
+    if not text:
+        return None
+    try:
+        values = [int(v) for v in text.split(",")]
+    except ValueError:
+        return f"expected three vertex indices i,j,k, got {text!r}"
+    if len(values) != 3 or min(values) < 0 or len(set(values)) != 3:
+        return f"expected three different, non-negative vertex indices i,j,k, got {text!r}"
+    return None
 
 
 class StabilizeProcessor(Processor):
     name = "stabilize"
     version = "1"
     summary = "solve the rigid skull motion (mode pursuit, or a three-point/Procrustes/ICP baseline)"
+    reads = Reads("take", help="the take root (reads its capture, below any stabilized layer)")
+    writes = Writes("layer", role="stabilized", help="the stabilized layer to write (.usdc)")
     parameters = (
         Parameter("method", str, "mode-pursuit", "mode-pursuit, or a baseline: three-point, procrustes, icp", METHODS),
         Parameter("solver", str, "fast", "mode pursuit's solver: fast, or reference (the paper's PyTorch formulation)", ("fast", "reference")),
-        Parameter("init", str, "icp", "mode pursuit's initial alignment: identity, three-point, procrustes, icp",
-                  ("identity", "three-point", "procrustes", "icp")),
-        Parameter("iterations", int, 12, "L-BFGS iterations per stage (the paper uses 12 or 24)"),
+        Parameter("init", str, "icp", "mode pursuit's initial alignment", ("identity", "three-point", "procrustes", "icp")),
+        Parameter("iterations", int, 12, "L-BFGS iterations per stage (the paper uses 12 or 24)", minimum=1, maximum=1000),
         Parameter("rest", str, "take", "rest mesh: the take's rest points (take), or estimated from the data (estimate)", ("take", "estimate")),
         Parameter("mask", str, "rigid", "vertices the solve uses: the take's rigid-region weights (rigid), or all", ("rigid", "all")),
-        Parameter("three_point", str, "", "three vertex indices i,j,k (default: the take's eye corners and under-nose point)"),
-        Parameter("backend", str, "auto", "fast solver's energy kernel: auto, opencl, numpy", ("auto", "opencl", "numpy")),
-        Parameter("reference_fps", float, 120.0, "frame rate at which the paper's per-frame velocity widths are read"),
+        Parameter("three_point", str, "", "three vertex indices i,j,k (default: the take's eye corners and under-nose point)",
+                  check=_three_indices),
+        Parameter("backend", str, "auto", "fast solver's energy kernel", BACKENDS),
+        Parameter("reference_fps", float, 120.0, "frame rate at which the paper's per-frame velocity widths are read",
+                  above=0.0, maximum=100000.0),
     )
 
-    def check(self, request: Request) -> dict:
-        perf, source = _read(request)
+    def prepare(self, request: Request) -> Plan:
+        from facedyn.usd.take import read_take_below
+
+        path = single_input(request)
+        perf, source = read_take_below(path, self.writes.role, frames=request.frames)
         params = request.params
-        weights, rest, three_point = _inputs(perf, params)
-        return {
-            "take": str(request.inputs[0]), "frames": perf.frame_count, "points": perf.point_count,
-            "method": params["method"], "solve vertices": int(np.count_nonzero(weights)) if weights is not None else perf.point_count,
-            "rest": "take's rest points" if rest is not None else "estimated from the data",
+        weights, rest, three_point = _solve_inputs(perf, params)
+        description = {
+            "take": str(path), "frames": perf.frame_count, "points": perf.point_count, "method": params["method"],
+            "solve_vertices": int(np.count_nonzero(weights)) if weights is not None else perf.point_count,
+            "rest": "the take's rest points" if rest is not None else "estimated from the data",
             "three_point": three_point,
         }
+        return Plan(description, (perf, source, params, weights, rest, three_point))
 
-    def run(self, request: Request, progress: Progress) -> Result:
+    def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.stabilize.api import stabilize
         from facedyn.stabilize.schedule import Schedule
         from facedyn.usd import schema
         from facedyn.usd.layers import LayerContent
 
-        perf, source = _read(request)
-        params = request.params
-        weights, rest, three_point = _inputs(perf, params)
-        if params["iterations"] < 1:
-            raise UsageError("iterations must be at least 1")
+        perf, source, params, weights, rest, three_point = plan.state
         schedule = Schedule(iterations=params["iterations"], reference_fps=params["reference_fps"])
         progress.start(f"stabilize ({params['method']})", 1)
         result = stabilize(
@@ -61,33 +78,24 @@ class StabilizeProcessor(Processor):
             init=params["init"], three_point=three_point, schedule=schedule, backend=params["backend"],
         )
         progress.finish()
-        landmarks = perf.landmarks
         layer = LayerContent(
-            frames=perf.frames, mesh_path=source.mesh_path, skull_path=source.skull_path or _parent(source.mesh_path),
+            frames=perf.frames, mesh_path=source.mesh_path, skull_path=source.skull_path or source.mesh_path.rsplit("/", 1)[0],
             points=result.skull_points, skull_translate=result.translate, skull_orient=result.orient,
             solve_error=result.solve_error,
-            face=schema.FaceAttributes(role="stabilized", rest_points=result.rest.astype(np.float32)),
-            skull=schema.SkullAttributes(solver=params["method"], landmarks=landmarks, reference_frame=float(perf.frames[0])),
+            face=schema.FaceAttributes(role=self.writes.role, rest_points=result.rest.astype(np.float32)),
+            skull=schema.SkullAttributes(solver=params["method"], landmarks=perf.landmarks, reference_frame=float(perf.frames[0])),
         )
         summary = {
-            "median solve error (cm)": round(float(np.median(result.solve_error)), 5),
+            "median_solve_error_cm": round(float(np.median(result.solve_error)), 5),
             "seconds": {k: round(v, 3) for k, v in result.timings.items()},
         }
         if result.energy is not None:
-            summary["final energy"] = round(float(result.energy), 3)
+            summary["final_energy"] = round(float(result.energy), 3)
             summary["backend"] = result.backend
-        return Result(layer=layer, timing=source.timing, inputs=list(source.layer_identifiers), summary=summary)
+        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.layer_identifiers), summary=summary)
 
 
-def _read(request: Request):
-    from facedyn.usd.take import read_take
-
-    if len(request.inputs) != 1:
-        raise UsageError("stabilize takes one TAKE")
-    return read_take(request.inputs[0], frames=request.frames)
-
-
-def _inputs(perf, params):
+def _solve_inputs(perf, params):
     """Solve weights, rest mesh and three-point vertices from the take and the parameters."""
     from facedyn.usd.errors import TakeError
 
@@ -99,19 +107,12 @@ def _inputs(perf, params):
         raise TakeError(f"the take's rest points hold {len(rest)} points for a {perf.point_count}-point mesh")
     three_point = None
     if params["three_point"]:
-        try:
-            three_point = tuple(int(v) for v in params["three_point"].split(","))
-        except ValueError:
-            raise UsageError(f"three_point must be three vertex indices i,j,k, got {params['three_point']!r}") from None
-        if len(three_point) != 3 or not all(0 <= v < perf.point_count for v in three_point):
-            raise UsageError(f"three_point must be three vertex indices in [0, {perf.point_count}), got {params['three_point']!r}")
+        three_point = tuple(int(v) for v in params["three_point"].split(","))
+        if max(three_point) >= perf.point_count:
+            raise UsageError(f"--three-point: vertex indices must be below {perf.point_count}, got {params['three_point']!r}")
     elif perf.alignment_vertices is not None and len(perf.alignment_vertices) == 3:
         three_point = tuple(int(v) for v in perf.alignment_vertices)
     needs_three = params["method"] == "three-point" or (params["method"] == "mode-pursuit" and params["init"] == "three-point")
     if needs_three and three_point is None:
         raise UsageError("three-point alignment needs --three-point i,j,k (the take names no eye corners / nose point)")
     return weights, rest, three_point
-
-
-def _parent(path: str) -> str:
-    return path.rsplit("/", 1)[0]

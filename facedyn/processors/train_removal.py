@@ -1,110 +1,70 @@
 """`usdfacedyn train-removal`: train network F on a corpus and write the model file.
 
-Not a layer processor: its output is a model (weights + JSON metadata, facedyn.dynamics
-.modelfile), the input of the remove processor.
+Its output is a model (weights + JSON metadata, facedyn.dynamics.modelfile), the input of
+the remove processor.
 """
 from __future__ import annotations
 
-import fnmatch
-import time
 from dataclasses import replace
-from pathlib import Path
 
 from facedyn.errors import UsageError
+from facedyn.processors.base import ModelOutput, Parameter, Plan, Processor, Reads, Request, Writes
+from facedyn.processors.training_inputs import TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths, validation_names
 from facedyn.progress import Progress
 
 
-def load_takes(inputs: list[Path], skull: str, include: str | None, exclude: str | None, progress: Progress):
-    """(name, Performance) of every selected take, all of one topology."""
-    from facedyn.usd.errors import TakeError
-    from facedyn.usd.training_data import read_training_take, take_roots
+class TrainRemovalProcessor(Processor):
+    name = "train-removal"
+    version = "1"
+    summary = "train the removal network F on a corpus and write a model file"
+    reads = Reads("takes", metavar="CORPUS", help="corpus folders (corpus.json), take folders or stabilized takes")
+    writes = Writes("model", metavar="MODEL", help="the model file to write (e.g. actor.removal)")
+    parameters = (
+        Parameter("epochs", int, 250, "training epochs (the paper trains 250)", minimum=1, maximum=100000),
+        Parameter("subsample", float, 1.0, "fraction of the (frame, sample) pairs drawn each epoch", above=0.0, maximum=1.0),
+        Parameter("target", str, "moving-average",
+                  "F's targets: the paper's moving-average offsets, or a simulated corpus's true dynamics (with --skull truth)",
+                  ("moving-average", "truth")),
+        Parameter("skull_features", str, "velocity",
+                  "F's skull input: the paper's landmark velocities over t-10..t+10, or accelerations over t-30..t+10",
+                  ("velocity", "acceleration")),
+        *TRAINING_PARAMETERS,
+    )
 
-    roots = take_roots(inputs)
-    named = [(_take_name(root), root) for root in roots]
-    if include:
-        named = [(n, r) for n, r in named if fnmatch.fnmatch(n, include)]
-    if exclude:
-        named = [(n, r) for n, r in named if not fnmatch.fnmatch(n, exclude)]
-    if not named:
-        raise UsageError("no take left to train on after --include/--exclude")
-    takes = []
-    progress.start("read takes", len(named))
-    for name, root in named:
-        perf, _ = read_training_take(root, skull)
-        if takes and perf.topology.fingerprint() != takes[0][1].topology.fingerprint():
-            raise TakeError(f"{root}: its mesh topology differs from {takes[0][0]}'s; a model is trained for one topology")
-        takes.append((name, perf))
-        progress.advance()
-    progress.finish()
-    return takes
+    def prepare(self, request: Request) -> Plan:
+        params = request.params
+        if params["target"] == "truth" and params["skull"] != "truth":
+            raise UsageError("--target truth needs --skull truth: the true dynamics are vectors in the true skull's frame, "
+                             "which a solved skull matches only up to an unknown rigid transform")
+        takes = load_takes(request.inputs, params, Progress.silent())
+        truths = read_truths(request.inputs, [name for name, _ in takes]) if params["target"] == "truth" else None
+        description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes), "target": params["target"],
+                       "skull": params["skull"], "epochs": params["epochs"]}
+        return Plan(description, (request, takes, truths))
 
+    def run(self, plan: Plan, progress: Progress) -> ModelOutput:
+        from facedyn.dynamics.face import FaceSetup
+        from facedyn.dynamics.skull_motion import NAMED
+        from facedyn.dynamics.training import Take, TrainConfig, train_removal
 
-def validation_names(text: str | None) -> tuple[str, ...] | None:
-    """--validation a,b -> ("a", "b"); None or empty -> None (the trainer's default)."""
-    return tuple(name for name in (text or "").split(",") if name) or None
-
-
-def epoch_reporter(progress: Progress, task: str, epochs: int):
-    """(a training callback that advances `progress` per epoch, the dict holding the last losses)."""
-    last: dict = {}
-    progress.start(task, epochs)
-
-    def on_epoch(epoch, train_loss, val_loss):
-        last.update(epoch=epoch, train=train_loss, val=val_loss)
-        progress.advance()
-
-    return on_epoch, last
-
-
-def read_truths(inputs: list[Path], names: list[str]) -> dict:
-    """{take name: its truth Performance (points = true quasistatic, offsets = true dynamics)}
-    for simulated corpus takes (facedyn.usd.corpus keeps the truth beside each take)."""
-    from facedyn.usd.corpus import read_truth
-    from facedyn.usd.training_data import take_roots
-
-    folders = {_take_name(root): root if root.is_dir() else root.parent for root in take_roots(inputs)}
-    return {name: read_truth(folders[name]) for name in names}
-
-
-def _take_name(root: Path) -> str:
-    return root.name if root.is_dir() else root.parent.name if root.name in ("take.usda", "truth.usda") else root.stem
+        request, takes, truths = plan.state
+        params = request.params
+        face = FaceSetup.from_performance(takes[0][1], sample_count=params["samples"])
+        config = TrainConfig(epochs=params["epochs"], subsample=params["subsample"], validation=validation_names(params),
+                             seed=params["seed"], device=params["device"], target=params["target"],
+                             skull_motion=NAMED[params["skull_features"]] if params["skull_features"] == "acceleration" else None)
+        training = [Take.from_performance(perf, name) for name, perf in takes]
+        if truths is not None:
+            training = [replace(take, dynamics=truths[take.name].offsets) for take in training]
+        on_epoch, last = epoch_reporter(progress, f"train F ({len(takes)} takes)", config.epochs)
+        model = train_removal(training, face, config, on_epoch, backend=params["backend"])
+        progress.finish()
+        model.info["training"]["skull"] = params["skull"]
+        model.info["training"]["inputs"] = [str(p) for p in request.inputs]
+        return ModelOutput(model, training_summary(model, takes, face, last))
 
 
-def train_removal_command(args) -> dict:
-    """Run the training the parsed command line asks for; return a JSON-able report."""
-    from facedyn.dynamics.face import FaceSetup
-    from facedyn.dynamics.modelfile import save_model
-    from facedyn.dynamics.skull_motion import SkullMotionInput
-    from facedyn.dynamics.training import Take, TrainConfig, train_removal
-
-    if args.target == "truth" and args.skull != "truth":
-        raise UsageError("--target truth needs --skull truth: the true dynamics are vectors in the true skull's frame, "
-                         "which a solved skull matches only up to an unknown rigid transform")
-    progress = Progress.silent() if args.json else Progress()
-    started = time.perf_counter()
-    takes = load_takes(args.inputs, args.skull, args.include, args.exclude, progress)
-    face = FaceSetup.from_performance(takes[0][1], sample_count=args.samples)
-    config = TrainConfig(epochs=args.epochs, subsample=args.subsample, validation=validation_names(args.validation),
-                         seed=args.seed, device=args.device, target=args.target,
-                         skull_motion=SkullMotionInput() if args.skull_features == "acceleration" else None)
-    training = [Take.from_performance(perf, name) for name, perf in takes]
-    if args.target == "truth":
-        truths = read_truths(args.inputs, [name for name, _ in takes])
-        training = [replace(take, dynamics=truths[take.name].offsets) for take in training]
-    read_seconds = time.perf_counter() - started
-    on_epoch, curve_tail = epoch_reporter(progress, f"train F ({len(takes)} takes)", config.epochs)
-    model = train_removal(training, face, config, on_epoch, backend=args.backend)
-    progress.finish()
-    model.info["training"]["skull"] = args.skull
-    model.info["training"]["inputs"] = [str(p) for p in args.inputs]
-    path = save_model(model, args.output)
-    return {
-        "model": str(path),
-        "takes": len(takes),
-        "samples": int(len(face.samples)),
-        "fps": model.fps,
-        "skull_features": model.skull_input.to_json(),
-        "validation": model.info["validation"],
-        "final_loss": curve_tail,
-        "seconds": {"read": round(read_seconds, 2), "total": round(time.perf_counter() - started, 2)},
-    }
+def training_summary(model, takes, face, last: dict) -> dict:
+    """What a trainer reports: the data, the validation errors, the last losses."""
+    return {"takes": len(takes), "samples": int(len(face.samples)), "fps": model.fps,
+            "skull_features": model.skull_input.to_json(), "validation": model.info["validation"], "final_loss": last}

@@ -9,47 +9,63 @@ accelerations by default, the paper's velocities with `--skull-features velocity
 """
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
-from facedyn.processors.train_removal import epoch_reporter, load_takes, read_truths, validation_names
+from facedyn.processors.base import ModelOutput, Parameter, Plan, Processor, Reads, Request, Writes
+from facedyn.processors.train_removal import training_summary
+from facedyn.processors.training_inputs import TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths, validation_names
 from facedyn.progress import Progress
 
 
-def train_synthesis_command(args) -> dict:
-    from facedyn.dynamics.face import FaceSetup
-    from facedyn.dynamics.modelfile import load_model, save_model
-    from facedyn.dynamics.skull_motion import NAMED
-    from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
-    from facedyn.dynamics.training import Take
-    from facedyn.usd.errors import TakeError
+class TrainSynthesisProcessor(Processor):
+    name = "train-synthesis"
+    version = "1"
+    summary = "train the synthesis network H on a corpus and write a model file"
+    reads = Reads("takes", metavar="CORPUS", help="corpus folders (corpus.json), take folders or stabilized takes")
+    writes = Writes("model", metavar="MODEL", help="the model file to write (e.g. actor.synthesis)")
+    parameters = (
+        Parameter("quasistatic", str, help="a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes)",
+                  metavar="MODEL|truth"),
+        Parameter("epochs", int, 30, "training epochs (the paper trains 30)", minimum=1, maximum=100000),
+        Parameter("skull_features", str, "acceleration",
+                  "H's skull input: landmark accelerations over t-30..t+10 (beyond the paper), or the paper's velocities over t-10..t+10",
+                  ("acceleration", "velocity")),
+        *TRAINING_PARAMETERS,
+    )
 
-    progress = Progress.silent() if args.json else Progress()
-    started = time.perf_counter()
-    takes = load_takes(args.inputs, args.skull, args.include, args.exclude, progress)
-    first = takes[0][1]
-    if first.uvs is None:
-        raise TakeError(f"{args.inputs[0]}: the takes have no uvs (primvars:st); stretch features need them")
-    if args.quasistatic == "truth":
-        truths = read_truths(args.inputs, [name for name, _ in takes])
-        quasistatic = {name: truth.points for name, truth in truths.items()}
-        face = FaceSetup.from_performance(first, sample_count=args.samples)
-    else:
-        quasistatic = load_model(args.quasistatic, topology=first.topology, fps=first.fps)
-        if quasistatic.kind != "removal":
-            raise TakeError(f"{args.quasistatic}: a {quasistatic.kind} model; --quasistatic needs a removal model or 'truth'")
-        face = quasistatic.face  # H uses F's samples and landmarks
-    config = synthesis_config(epochs=args.epochs, validation=validation_names(args.validation), seed=args.seed, device=args.device,
-                              skull_motion=NAMED[args.skull_features])
-    read_seconds = time.perf_counter() - started
-    on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
-    model = train_synthesis([Take.from_performance(perf, name) for name, perf in takes], face, first.uvs,
-                            quasistatic, config, on_epoch, backend=args.backend)
-    progress.finish()
-    model.info["training"].update(skull=args.skull, inputs=[str(p) for p in args.inputs], quasistatic=str(args.quasistatic))
-    path = save_model(model, Path(args.output))
-    return {
-        "model": str(path), "takes": len(takes), "samples": int(len(face.samples)), "fps": model.fps,
-        "quasistatic": str(args.quasistatic), "skull_features": model.skull_motion.to_json(), "validation": model.info["validation"], "final_loss": last,
-        "seconds": {"read": round(read_seconds, 2), "total": round(time.perf_counter() - started, 2)},
-    }
+    def prepare(self, request: Request) -> Plan:
+        from facedyn.dynamics.face import FaceSetup
+        from facedyn.dynamics.modelfile import load_model
+        from facedyn.usd.errors import TakeError
+
+        params = request.params
+        takes = load_takes(request.inputs, params, Progress.silent())
+        first = takes[0][1]
+        if first.uvs is None:
+            raise TakeError(f"{request.inputs[0]}: the takes have no uvs (primvars:st); stretch features need them")
+        if params["quasistatic"] == "truth":
+            truths = read_truths(request.inputs, [name for name, _ in takes])
+            quasistatic = {name: truth.points for name, truth in truths.items()}
+            face = FaceSetup.from_performance(first, sample_count=params["samples"])
+        else:
+            quasistatic = load_model(params["quasistatic"], topology=first.topology, fps=first.fps)
+            if quasistatic.kind != "removal":
+                raise TakeError(f"{params['quasistatic']}: a {quasistatic.kind} model; --quasistatic needs a removal model or 'truth'")
+            face = quasistatic.face  # H uses F's samples and landmarks
+        description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes),
+                       "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": params["epochs"]}
+        return Plan(description, (request, takes, quasistatic, face))
+
+    def run(self, plan: Plan, progress: Progress) -> ModelOutput:
+        from facedyn.dynamics.skull_motion import NAMED
+        from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
+        from facedyn.dynamics.training import Take
+
+        request, takes, quasistatic, face = plan.state
+        params = request.params
+        config = synthesis_config(epochs=params["epochs"], validation=validation_names(params), seed=params["seed"],
+                                  device=params["device"], skull_motion=NAMED[params["skull_features"]])
+        on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
+        model = train_synthesis([Take.from_performance(perf, name) for name, perf in takes], face, takes[0][1].uvs,
+                                quasistatic, config, on_epoch, backend=params["backend"])
+        progress.finish()
+        model.info["training"].update(skull=params["skull"], inputs=[str(p) for p in request.inputs], quasistatic=params["quasistatic"])
+        return ModelOutput(model, {**training_summary(model, takes, face, last), "quasistatic": params["quasistatic"]})

@@ -8,6 +8,7 @@ from pathlib import Path
 from pxr import Sdf, UsdGeom
 
 from facedyn.usd import schema
+from facedyn.usd.layerstack import layer_role
 from facedyn.usd.stage import open_stage
 from facedyn.usd.take import find_face_mesh
 
@@ -57,23 +58,9 @@ def _describe_layer(layer: Sdf.Layer) -> dict:
         "frameRange": list(data["frameRange"]) if "frameRange" in data else None,
         "inputs": list(data.get("inputs", [])),
         "parameters": json.loads(data["parameters"]) if "parameters" in data else {},
-        "role": _layer_role(layer),
+        "role": layer_role(layer),
     }
     return entry
-
-
-def _layer_role(layer: Sdf.Layer) -> str:
-    """The face role this layer authors, if it authors one."""
-    found = []
-
-    def visit(path):
-        if path.IsPropertyPath() and path.name == schema.ROLE_ATTR:
-            spec = layer.GetAttributeAtPath(path)
-            if spec is not None and spec.default is not None:
-                found.append(str(spec.default))
-
-    layer.Traverse(Sdf.Path.absoluteRootPath, visit)
-    return found[0] if found else ""
 
 
 def format_description(d: dict) -> str:

@@ -255,3 +255,29 @@ def _insert_sublayer(root: Path, layer_path: Path, strongest: bool) -> list[str]
     existing.subLayerPaths = [entry] + paths if strongest else paths + [entry]
     export_atomically(existing, root)
     return list(existing.subLayerPaths)
+
+
+def check_output_paths(output: Path, inputs: list[Path], attach: Path | None = None, root: Path | None = None,
+                       role: str | None = None) -> None:
+    """Refuse an output that is the take root it would be attached to."""
+    from facedyn.errors import UsageError
+
+    for target in (attach, root):
+        if target is not None and Path(target).resolve() == Path(output).resolve():
+            raise UsageError(f"{output}: the output is the take root it would be attached to; choose another -o")
+
+
+@dataclass
+class Placement:
+    sublayers: list[str]
+    stale: list[str]
+
+
+def write_and_attach(root: Path, layer_path: Path, role_name: str, write, timing: Timing, frames) -> Placement:
+    """Write the layer (through `write`) and place it in root's subLayers by role."""
+    write()
+    if not root.exists():
+        write_take_root(root, [layer_path], timing)
+        return Placement([relative_asset_path(layer_path, root.parent)], [])
+    sublayers = attach_weakest(root, layer_path) if role_name == "captured" else attach(root, layer_path)
+    return Placement(sublayers, [])

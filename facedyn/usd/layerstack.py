@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pxr import Sdf, Usd
 
+from facedyn.usd import schema
+
 HEAT_MAP_PROCESSORS = frozenset({"preview"})
 
 
@@ -43,3 +45,17 @@ def toggle(stage: Usd.Stage, processors: frozenset[str] | set[str]) -> bool:
 def unmute_all(stage: Usd.Stage) -> None:
     muted = [i for i in stage.GetMutedLayers() if processor_of(Sdf.Layer.FindOrOpen(i))]
     stage.MuteAndUnmuteLayers([], muted)
+
+
+def layer_role(layer: Sdf.Layer) -> str:
+    """The face role this layer authors, if it authors one."""
+    found = []
+
+    def visit(path):
+        if path.IsPropertyPath() and path.name == schema.ROLE_ATTR:
+            spec = layer.GetAttributeAtPath(path)
+            if spec is not None and spec.default is not None:
+                found.append(str(spec.default))
+
+    layer.Traverse(Sdf.Path.absoluteRootPath, visit)
+    return found[0] if found else ""

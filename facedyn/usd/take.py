@@ -234,3 +234,34 @@ def ensure_finite(values: np.ndarray, time_codes: np.ndarray, where: str) -> Non
         bad = int(np.argmin(finite))
         raise TakeError(f"{where}: NaN or infinite values at time {time_codes[bad]:g}")
 
+
+
+_ROLE_OF_PROCESSOR = {"import": "captured", "stabilize": "stabilized", "remove": "quasistatic", "synthesize": "synthesized",
+                      "retarget": "retargeted", "preview": "preview"}
+
+
+def read_take_below(path: str | os.PathLike, role_name: str, frames: tuple[float, float] | None = None,
+                    mesh: str | None = None) -> tuple[Performance, TakeSource]:
+    """The take composed from the layers below `role_name`'s rank (what a processor writing it reads)."""
+    from facedyn.performance import role
+    from facedyn.usd.layerstack import layer_role, processor_of
+
+    rank = role(role_name).rank
+    stage = open_stage(path)
+    above = [layer.identifier for layer in stage.GetUsedLayers(includeClipLayers=False)
+             if (name := _ROLE_OF_PROCESSOR.get(processor_of(layer) or "") or layer_role(layer)) and role(name).rank >= rank]
+    stage.MuteAndUnmuteLayers(above, [])
+    return read_stage(stage, Path(path), mesh, frames)
+
+
+def read_layers(layers: list[Path]) -> Performance:
+    """The face of layers stacked in memory (strongest first), without a root on disk."""
+    from pxr import Sdf
+
+    from facedyn.usd.timing import Timing
+
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    Timing.from_layer(Sdf.Layer.FindOrOpen(str(layers[-1]))).apply(layer)
+    layer.subLayerPaths = [str(p) for p in layers]
+    perf, _ = read_stage(Usd.Stage.Open(layer), Path(layers[0]))
+    return perf

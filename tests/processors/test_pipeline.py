@@ -122,7 +122,7 @@ def test_train_removal_on_true_dynamics(corpus, capsys, tmp_path):
                "--epochs", "2", "--include", "smile*", "--samples", "32") == 0
     report = json.loads(capsys.readouterr().out)
     model = load_model(tmp_path / "f.removal")
-    assert model.info["training"]["config"]["target"] == "truth" and report["takes"] == 4
+    assert model.info["training"]["config"]["target"] == "truth" and report["summary"]["takes"] == 4
     # true dynamics live in the true skull's frame: a solved skull is refused up front
     assert cli("train-removal", folder, "-o", tmp_path / "h.removal", "--target", "truth", "--epochs", "1") == 2
     assert "--skull truth" in capsys.readouterr().err and not (tmp_path / "h.removal").exists()
@@ -151,11 +151,11 @@ def test_training_skull_features(corpus, capsys, tmp_path):
     assert cli("train-synthesis", folder, "-o", tmp_path / "paper.synthesis", "--quasistatic", "truth", "--skull", "truth",
                "--skull-features", "velocity", "--epochs", "1", "--include", "smile*") == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["skull_features"] == {"kind": "velocity", "past": 10, "future": 10}
+    assert report["summary"]["skull_features"] == {"kind": "velocity", "past": 10, "future": 10}
     model = load_model(tmp_path / "paper.synthesis")
     assert model.skull_motion == PAPER and model.network.spec.inputs == 315 + 2 * len(model.face.samples)
     assert load_model(models / "f.removal").skull_input == PAPER
     assert cli("train-removal", folder, "-o", tmp_path / "acc.removal", "--skull", "truth", "--skull-features", "acceleration",
                "--epochs", "1", "--include", "smile*", "--samples", "32") == 0
-    assert json.loads(capsys.readouterr().out)["skull_features"] == {"kind": "acceleration", "past": 30, "future": 10}
+    assert json.loads(capsys.readouterr().out)["summary"]["skull_features"] == {"kind": "acceleration", "past": 30, "future": 10}
     assert load_model(tmp_path / "acc.removal").skull_motion == SkullMotionInput()

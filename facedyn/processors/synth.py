@@ -1,0 +1,69 @@
+"""`usdfacedyn synth`: simulate a corpus of takes with known truth (the papers' capture protocol).
+
+A corpus builder: it writes a folder (corpus.json plus one take folder per take, each with
+its truth beside it), the input of the trainers.
+"""
+from __future__ import annotations
+
+import fnmatch
+import os
+from pathlib import Path
+
+from facedyn.errors import UsageError
+from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
+from facedyn.progress import Progress
+
+
+class SynthProcessor(Processor):
+    name = "synth"
+    version = "1"
+    summary = "simulate a corpus of takes with known truth (the papers' capture protocol)"
+    reads = Reads("nothing")
+    writes = Writes("folder", metavar="DIR", help="the corpus folder to write")
+    parameters = (
+        Parameter("scale", str, "demo", "protocol size", ("demo", "standard")),
+        Parameter("rig", Path, None, "a UsdSkel blend-shape rig (default: the built-in face)", metavar="RIG"),
+        Parameter("actor_seed", int, None, "make another actor from the rig's identity modes", minimum=0, maximum=2**32 - 1),
+        Parameter("data", Path, None, "a ../shared/data-like folder with Live Link curves and CMU mocap for dialog takes", metavar="DIR"),
+        Parameter("noise", float, 0.0, "Gaussian tracking noise on the captured points, cm", minimum=0.0, maximum=10.0, metavar="CM"),
+        Parameter("seed", int, 0, "seed of the protocol's random choices", minimum=0, maximum=2**32 - 1),
+        Parameter("only", str, "", "only takes whose name matches this glob pattern", metavar="PATTERN"),
+        Parameter("jobs", int, os.cpu_count() or 1, "takes simulated at once", minimum=1, maximum=1024),
+    )
+
+    def prepare(self, request: Request) -> Plan:
+        from facedyn.sim.corpus import protocol
+
+        params = request.params
+        rig = load_rig(params["rig"], params["actor_seed"])
+        specs = protocol(rig, params["scale"], params["data"], seed=params["seed"], noise_cm=params["noise"])
+        if params["only"]:
+            specs = [s for s in specs if fnmatch.fnmatch(s.name, params["only"])]
+            if not specs:
+                raise UsageError(f"--only: no take of the {params['scale']} protocol matches {params['only']!r}")
+        description = {"takes": len(specs), "rig": str(params["rig"] or "built-in"), "points": rig.point_count}
+        return Plan(description, (request, rig, specs))
+
+    def run(self, plan: Plan, progress: Progress) -> FolderOutput:
+        from facedyn.usd.corpus import build_corpus
+
+        request, rig, specs = plan.state
+        params = request.params
+        description = {"scale": params["scale"], "rig": str(params["rig"] or "built-in"), "actor_seed": params["actor_seed"],
+                       "noise_cm": params["noise"], "seed": params["seed"]}
+        index = build_corpus(request.output, rig, specs, progress=progress, description=description, jobs=params["jobs"])
+        return FolderOutput({"takes": len(index["takes"]), "frames": index["frames"], "points": index["points"],
+                             "simulated_frames_per_second": index["simulated_frames_per_second"], "jobs": params["jobs"]})
+
+
+def load_rig(path: Path | None, actor_seed: int | None = None):
+    """The built-in face or a USD blend-shape rig, optionally turned into another actor."""
+    if path is None:
+        from facedyn.sim.default_face import default_face
+
+        rig = default_face()
+    else:
+        from facedyn.usd.rig import read_blendshape_rig
+
+        rig = read_blendshape_rig(path)
+    return rig if actor_seed is None else rig.make_actor(seed=actor_seed)

@@ -1,0 +1,79 @@
+"""What the trainers share: reading takes from corpora, their truth, and their common flags."""
+from __future__ import annotations
+
+import fnmatch
+from pathlib import Path
+
+from facedyn.errors import UsageError
+from facedyn.performance import BACKENDS
+from facedyn.processors.base import Parameter, check_device
+from facedyn.progress import Progress
+
+TRAINING_PARAMETERS = (
+    Parameter("skull", str, "take", "the takes' solved skull, or a simulated corpus's true skull", ("take", "truth")),
+    Parameter("samples", int, 344, "skin samples when the takes (or the removal model) define none", minimum=1, maximum=100000),
+    Parameter("validation", str, "", "comma-separated take names held out for validation (default: the last take)", metavar="NAMES"),
+    Parameter("include", str, "", "only takes whose name matches this glob pattern", metavar="PATTERN"),
+    Parameter("exclude", str, "", "leave out takes whose name matches this glob pattern", metavar="PATTERN"),
+    Parameter("seed", int, 0, "seed of the network's initialization and the epochs' sampling", minimum=0, maximum=2**32 - 1),
+    Parameter("device", str, "auto", "torch device: auto, cpu, cuda, cuda:N", check=check_device),
+    Parameter("backend", str, "auto", "feature and stretch kernels", BACKENDS),
+)
+
+
+def load_takes(inputs: list[Path], params: dict, progress: Progress) -> list:
+    """(name, Performance) of every selected take, all of one topology; validation names checked."""
+    from facedyn.usd.errors import TakeError
+    from facedyn.usd.training_data import read_training_take, take_roots
+
+    named = [(take_name(root), root) for root in take_roots(inputs)]
+    if params["include"]:
+        named = [(n, r) for n, r in named if fnmatch.fnmatch(n, params["include"])]
+    if params["exclude"]:
+        named = [(n, r) for n, r in named if not fnmatch.fnmatch(n, params["exclude"])]
+    if not named:
+        raise UsageError("no take left to train on after --include/--exclude")
+    missing = [name for name in validation_names(params) or () if name not in {n for n, _ in named}]
+    if missing:
+        raise UsageError(f"--validation: no take named {', '.join(missing)} among the {len(named)} selected takes")
+    takes = []
+    progress.start("read takes", len(named))
+    for name, root in named:
+        perf, _ = read_training_take(root, params["skull"])
+        if takes and perf.topology.fingerprint() != takes[0][1].topology.fingerprint():
+            raise TakeError(f"{root}: its mesh topology differs from {takes[0][0]}'s; a model is trained for one topology")
+        takes.append((name, perf))
+        progress.advance()
+    progress.finish()
+    return takes
+
+
+def validation_names(params: dict) -> tuple[str, ...] | None:
+    """--validation a,b -> ("a", "b"); empty -> None (the trainer's default)."""
+    return tuple(name for name in params["validation"].split(",") if name) or None
+
+
+def epoch_reporter(progress: Progress, task: str, epochs: int):
+    """(a training callback that advances `progress` per epoch, the dict holding the last losses)."""
+    last: dict = {}
+    progress.start(task, epochs)
+
+    def on_epoch(epoch, train_loss, val_loss):
+        last.update(epoch=epoch, train=train_loss, val=val_loss)
+        progress.advance()
+
+    return on_epoch, last
+
+
+def read_truths(inputs: list[Path], names: list[str]) -> dict:
+    """{take name: its truth Performance (points = true quasistatic, offsets = true dynamics)}
+    for simulated corpus takes (facedyn.usd.corpus keeps the truth beside each take)."""
+    from facedyn.usd.corpus import read_truth
+    from facedyn.usd.training_data import take_roots
+
+    folders = {take_name(root): root if root.is_dir() else root.parent for root in take_roots(inputs)}
+    return {name: read_truth(folders[name]) for name in names}
+
+
+def take_name(root: Path) -> str:
+    return root.name if root.is_dir() else root.parent.name if root.name in ("take.usda", "truth.usda") else root.stem

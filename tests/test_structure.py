@@ -1,0 +1,72 @@
+"""The package's shape: no import loops, pxr only at the edges, algorithms import without USD."""
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "facedyn"
+PXR_ALLOWED = ("facedyn.usd", "facedyn.processors")
+
+
+def _modules() -> dict[str, Path]:
+    found = {}
+    for path in PACKAGE.rglob("*.py"):
+        name = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+        found[name.removesuffix(".__init__")] = path
+    return found
+
+
+def _imports(path: Path, modules: dict[str, Path]) -> set[str]:
+    """Every facedyn module (or pxr) that `path` imports, at module level or inside functions."""
+    targets = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = []
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            submodules = [f"{node.module}.{alias.name}" for alias in node.names if f"{node.module}.{alias.name}" in modules]
+            names = submodules if len(submodules) == len(node.names) else [node.module, *submodules]
+        for name in names:
+            if name.split(".")[0] == "pxr":
+                targets.add("pxr")
+                continue
+            while name and name not in modules:
+                name = name.rpartition(".")[0]
+            if name:
+                targets.add(name)
+    return targets
+
+
+def test_no_import_loops():
+    modules = _modules()
+    graph = {name: _imports(path, modules) - {name, "pxr"} for name, path in modules.items()}
+    state: dict[str, int] = {}
+    cycles = []
+
+    def visit(name, trail):
+        state[name] = 1
+        for other in sorted(graph[name]):
+            if state.get(other) == 1:
+                cycles.append(trail[trail.index(other):] + [other])
+            elif other not in state:
+                visit(other, trail + [other])
+        state[name] = 2
+
+    for name in sorted(graph):
+        if name not in state:
+            visit(name, [name])
+    assert cycles == []
+
+
+def test_pxr_only_in_the_usd_package_and_the_processors():
+    modules = _modules()
+    users = sorted(name for name, path in modules.items() if "pxr" in _imports(path, modules))
+    assert users and all(name.startswith(PXR_ALLOWED) for name in users), users
+
+
+def test_algorithm_packages_import_without_usd():
+    code = ("import sys; sys.modules['pxr'] = None\n"
+            "import facedyn, facedyn.performance, facedyn.motion, facedyn.geometry, facedyn.stabilize, facedyn.dynamics.features, "
+            "facedyn.io.bvh, facedyn.sim.tissue\nprint('ok')")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0 and "ok" in result.stdout, result.stderr
