@@ -221,6 +221,19 @@ def _add_tools(commands) -> None:
     _common(p, "print the findings as JSON")
     p.set_defaults(handler=_cmd_validate)
 
+    p = commands.add_parser("layers", help="list a take's layers (roles, staleness), or mute, unmute, detach or reorder one on disk",
+                            description="Edits the take root atomically under its lock; the layer files themselves are never touched.")
+    p.add_argument("take", type=Path, metavar="TAKE")
+    action = p.add_mutually_exclusive_group()
+    action.add_argument("--mute", metavar="LAYER", help="take LAYER out of the stack (remembered, so --unmute puts it back)")
+    action.add_argument("--unmute", metavar="LAYER", help="put a muted LAYER back at its role's position")
+    action.add_argument("--detach", metavar="LAYER", help="remove LAYER from the stack for good (the file stays)")
+    action.add_argument("--move", metavar="LAYER", help="reorder LAYER among the layers of its role (with --above or --below)")
+    p.add_argument("--above", metavar="OTHER", help="with --move: place LAYER just above OTHER")
+    p.add_argument("--below", metavar="OTHER", help="with --move: place LAYER just below OTHER")
+    _common(p, "print the stack as JSON")
+    p.set_defaults(handler=_cmd_layers)
+
 
 def _cmd_list(args) -> int:
     from facedyn.processors import registry
@@ -254,6 +267,32 @@ def _cmd_inspect(args) -> int:
 
     description = describe_take(args.path)
     print(json.dumps(description, indent=2, default=str) if args.json else format_description(description))
+    return EXIT_OK
+
+
+def _cmd_layers(args) -> int:
+    from facedyn.errors import UsageError
+    from facedyn.usd import layerstack
+
+    if (args.above or args.below) and not args.move:
+        raise UsageError("--above/--below go with --move LAYER")
+    if args.move and bool(args.above) == bool(args.below):
+        raise UsageError("--move LAYER needs one of --above OTHER or --below OTHER")
+    if args.mute:
+        layerstack.mute(args.take, args.mute)
+    elif args.unmute:
+        layerstack.unmute(args.take, args.unmute)
+    elif args.detach:
+        layerstack.detach(args.take, args.detach)
+    elif args.move:
+        layerstack.move(args.take, args.move, above=args.above, below=args.below)
+    rows = [status.as_dict() for status in layerstack.stack_status(args.take)]
+    if args.json:
+        print(json.dumps(rows, indent=2, default=str))
+        return EXIT_OK
+    for i, row in enumerate(rows):
+        state = "muted" if row["muted"] else ("STALE: " + row["stale_reason"]) if row["stale"] else "current"
+        print(f"{i}. {row['layer']:<36} {row['role'] or '-':<12} {row['processor'] or '-':<16} {state}")
     return EXIT_OK
 
 

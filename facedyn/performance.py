@@ -218,3 +218,49 @@ class SkullTrajectory:
     def times(self) -> np.ndarray:
         """(F,) seconds of each frame."""
         return np.arange(self.frame_count) / self.fps
+
+
+def skull_frame_id(rest_points: np.ndarray, topology: Topology) -> str:
+    """What identifies a skull frame: the rest mesh a take was stabilized against (to 1 µm).
+
+    Takes stabilized against one actor's neutral share this id; a take stabilized against
+    its own estimated rest (its first frame's world) does not, and neither do two actors.
+    """
+    import hashlib
+
+    h = hashlib.sha1(topology.fingerprint().encode())
+    h.update(np.round(np.asarray(rest_points, dtype=np.float64), 4).astype(np.float32).tobytes())
+    return h.hexdigest()[:16]
+
+
+@dataclass
+class Actor:
+    """One actor's skull frame and face setup: everything later takes start from.
+
+    `neutral` is the jiggle-free neutral face in the actor's skull space; it defines that
+    space: every take stabilized against it lands in the same frame, and models trained in
+    it refuse takes in another (`skull_frame_id`).
+    """
+
+    name: str
+    neutral: np.ndarray  # (N, 3) float32, skull space, cm
+    topology: Topology
+    uvs: UVs | None = None
+    rigid_weights: np.ndarray | None = None  # (N,) in [0, 1]; None until known
+    face_vertices: np.ndarray | None = None
+    skin_samples: np.ndarray | None = None
+    alignment_vertices: np.ndarray | None = None  # (3,) eye corners L/R and under the nose
+    landmarks: np.ndarray | None = None  # (L, 3) skull landmarks in skull space
+    source: str = ""  # how it was made: "rig", "neutral" or "takes"
+
+    def __post_init__(self) -> None:
+        self.neutral = np.asarray(self.neutral, dtype=np.float32)
+        n = self.topology.point_count
+        if self.neutral.shape != (n, 3):
+            raise ValueError(f"an actor's neutral must be ({n}, 3) for its topology, got {self.neutral.shape}")
+        if not np.isfinite(self.neutral).all():
+            raise ValueError("an actor's neutral must be finite")
+
+    @property
+    def skull_frame(self) -> str:
+        return skull_frame_id(self.neutral, self.topology)

@@ -5,7 +5,7 @@ A processor declares
   the CLI, `--help`, `-p key=value` and the validation of every value are generated;
 - what it reads (`Reads`): a take (composed from the layers below the role it writes),
   several takes or corpora, source files, or nothing;
-- what it writes (`Writes`): a layer with a role, a model file, or a folder;
+- what it writes (`Writes`): a layer with a role, a file (a model, an actor), or a folder;
 and implements `prepare(request)`, which reads every input once and checks it, returning a
 `Plan` (what `--dry-run` prints plus the arrays `run` needs), and `run(plan, progress)`,
 which computes and returns the output. The runner (facedyn.processors.runner) checks paths,
@@ -124,7 +124,7 @@ class Reads:
 class Writes:
     """What a processor writes to `-o`."""
 
-    what: str  # "layer" (with `role`), "model" or "folder"
+    what: str  # "layer" (with `role`), "file" (a model, an actor asset) or "folder"
     role: str | None = None
     metavar: str = "LAYER"
     help: str = ""
@@ -163,10 +163,10 @@ class LayerOutput:
 
 
 @dataclass
-class ModelOutput:
-    """A trained model (facedyn.dynamics.modelfile.DynamicsModel) for the runner to save."""
+class FileOutput:
+    """A file (a model, an actor asset) and the function that saves it atomically at a path."""
 
-    model: Any
+    save: Callable[[Path], Path]
     summary: dict[str, Any] = field(default_factory=dict)
 
 
@@ -204,7 +204,7 @@ class Processor(ABC):
         """Read and check every input once (nothing is written); return the plan."""
 
     @abstractmethod
-    def run(self, plan: Plan, progress: Progress) -> LayerOutput | ModelOutput | FolderOutput:
+    def run(self, plan: Plan, progress: Progress) -> LayerOutput | FileOutput | FolderOutput:
         """Compute the output from what prepare() read."""
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import glob
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +45,7 @@ class ImportProcessor(Processor):
         source = _source(request)
         root = self.take_root(request)
         if source.kind == "usd":
-            stage, mesh_prim, time_codes = _usd_source(source.paths[0], request)
+            stage, mesh_prim, time_codes = _usd_source(source.paths[0], request.params["mesh"], request.frames)
             description = {"source": str(source.paths[0]), "mesh": str(mesh_prim.GetPath()), "frames": len(time_codes),
                            "fps": stage.GetTimeCodesPerSecond(), "root": str(root)}
             return Plan(description, (source, request, root, (stage, mesh_prim, time_codes)))
@@ -89,63 +90,96 @@ def _require_fps(request: Request) -> float:
     return fps
 
 
-def _usd_source(path: Path, request: Request):
+@dataclass
+class CanonicalMesh:
+    """An animated (or static) USD mesh in world space, centimetres, Y up: what a take holds."""
+
+    points: np.ndarray  # (F, N, 3) float32
+    frames: np.ndarray  # (F,) time codes
+    fps: float
+    topology: object  # facedyn.performance.Topology
+    uvs: object  # facedyn.performance.UVs | None
+    prim_path: str
+    face: object  # facedyn.usd.schema.FaceAttributes authored on the source mesh
+    source_fps: tuple[float, float]  # the source stage's (timeCodesPerSecond, framesPerSecond)
+
+
+def _usd_source(path: Path, mesh: str, frames=None, static_ok: bool = False):
+    """(stage, the mesh prim, its time codes): the named mesh, else the only animated one."""
     from facedyn.usd.errors import TakeError
     from facedyn.usd.stage import get_prim, layer_name, open_stage
     from facedyn.usd.take import find_animated_meshes, select_time_codes
     from pxr import UsdGeom
 
     stage = open_stage(path)
-    if request.params["mesh"]:
-        mesh_prim = get_prim(stage, request.params["mesh"])
+    if mesh:
+        mesh_prim = get_prim(stage, mesh)
         if not mesh_prim.IsA(UsdGeom.Mesh):
             raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()} is not a Mesh")
     else:
         animated = find_animated_meshes(stage)
+        if static_ok and not animated:
+            animated = [prim for prim in stage.Traverse() if prim.IsA(UsdGeom.Mesh)]
         if not animated:
             raise TakeError(f"{layer_name(stage)}: no Mesh with time-sampled points (nothing to import)")
         if len(animated) > 1:
             names = ", ".join(str(p.GetPath()) for p in animated)
-            raise TakeError(f"{layer_name(stage)}: several animated meshes ({names}); choose one with --mesh")
+            raise TakeError(f"{layer_name(stage)}: several {'animated ' if not static_ok else ''}meshes ({names}); choose one with --mesh")
         mesh_prim = animated[0]
-    return stage, mesh_prim, select_time_codes(stage, mesh_prim, request.frames)
+    if static_ok and UsdGeom.Mesh(mesh_prim).GetPointsAttr().GetNumTimeSamples() == 0:
+        return stage, mesh_prim, None
+    return stage, mesh_prim, select_time_codes(stage, mesh_prim, frames)
 
 
-def _import_usd(path: Path, usd, request: Request, progress: Progress) -> LayerOutput:
+def read_usd_mesh(path: Path, mesh: str = "", frames=None, first_frame_only: bool = False, usd=None) -> CanonicalMesh:
+    """A USD mesh's points in world space, centimetres, Y up (every frame, or the first only)."""
     from facedyn.usd import schema
-    from facedyn.usd.layers import LayerContent
+    from facedyn.usd.errors import TakeError
     from facedyn.usd.stage import layer_name
     from facedyn.usd.take import ensure_finite, read_topology, read_uvs, read_vec3_samples
     from facedyn.usd.timing import Timing
     from pxr import Usd, UsdGeom
 
-    stage, mesh_prim, time_codes = usd
+    stage, mesh_prim, time_codes = usd or _usd_source(path, mesh, frames, static_ok=first_frame_only)
     where = f"{layer_name(stage)}: {mesh_prim.GetPath()}"
-    mesh = UsdGeom.Mesh(mesh_prim)
-    topology = read_topology(mesh, where)
-    points = read_vec3_samples(mesh.GetPointsAttr(), time_codes, where + ".points").astype(np.float64)
+    geom = UsdGeom.Mesh(mesh_prim)
+    topology = read_topology(geom, where)
+    if time_codes is None:  # a static mesh: its default value
+        value = geom.GetPointsAttr().Get()
+        if value is None:
+            raise TakeError(f"{where}.points has no value")
+        time_codes, codes = np.zeros(1), [Usd.TimeCode.Default()]
+        points = np.asarray(value, dtype=np.float64)[None]
+    else:
+        time_codes = time_codes[:1] if first_frame_only else time_codes
+        codes = [Usd.TimeCode(float(t)) for t in time_codes]
+        points = read_vec3_samples(geom.GetPointsAttr(), time_codes, where + ".points").astype(np.float64)
     ensure_finite(points, time_codes, where + ".points")
     if points.shape[1] != topology.point_count:
-        from facedyn.usd.errors import TakeError
-
         raise TakeError(f"{where}: {points.shape[1]} points but the topology indexes {topology.point_count}")
-    xforms = np.array([np.asarray(UsdGeom.XformCache(Usd.TimeCode(t)).GetLocalToWorldTransform(mesh_prim)) for t in time_codes])
+    xforms = np.array([np.asarray(UsdGeom.XformCache(code).GetLocalToWorldTransform(mesh_prim)) for code in codes])
     if not np.allclose(xforms, np.eye(4)):
         points = np.einsum("fni,fij->fnj", points, xforms[:, :3, :3]) + xforms[:, None, 3, :3]
     timing = Timing.from_stage(stage)
     points = _to_canonical_axes(points * (timing.meters_per_unit / CENTIMETRES), timing.up_axis)
-    face = schema.FaceAttributes.read(mesh_prim)
+    return CanonicalMesh(points.astype(np.float32), time_codes, timing.time_codes_per_second, topology, read_uvs(geom),
+                         str(mesh_prim.GetPath()), schema.FaceAttributes.read(mesh_prim),
+                         (timing.time_codes_per_second, timing.frames_per_second))
+
+
+def _import_usd(path: Path, usd, request: Request, progress: Progress) -> LayerOutput:
+    from facedyn.usd import schema
+    from facedyn.usd.layers import LayerContent
+    from facedyn.usd.timing import Timing
+
+    mesh = read_usd_mesh(path, usd=usd)
+    face = mesh.face
     face.role = "captured"
-    layer = LayerContent(
-        frames=time_codes,
-        points=points.astype(np.float32),
-        topology=topology,
-        uvs=read_uvs(mesh),
-        face=face,
-        skull=schema.SkullAttributes(solver="identity"),
-    )
-    out_timing = Timing(timing.time_codes_per_second, timing.frames_per_second, float(time_codes[0]), float(time_codes[-1]), CENTIMETRES, "Y")
-    summary = {"source_mesh": str(mesh_prim.GetPath()), "points": points.shape[1], "fps": timing.time_codes_per_second}
+    layer = LayerContent(frames=mesh.frames, points=mesh.points, topology=mesh.topology, uvs=mesh.uvs, face=face,
+                         skull=schema.SkullAttributes(solver="identity"))
+    tcps, fps = mesh.source_fps
+    out_timing = Timing(tcps, fps, float(mesh.frames[0]), float(mesh.frames[-1]), CENTIMETRES, "Y")
+    summary = {"source_mesh": mesh.prim_path, "points": mesh.points.shape[1], "fps": tcps}
     return LayerOutput(layer=layer, timing=out_timing, inputs=[str(path)], define=True, summary=summary)
 
 

@@ -70,7 +70,23 @@ def read_with_model(request: Request, role_name: str, kind: str):
         step = "stabilize" if needed == "stabilized" else "remove"
         raise TakeError(f"{path}: below its {role_name} layers {source.mesh_path} is {perf.role}, not {needed}; "
                         f"run `usdfacedyn {step}` first")
+    check_skull_frame(path, perf, request.params["model"], model)
     return perf, source, model
+
+
+def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:
+    """A model predicts in the skull frame it was trained in: refuse a take stabilized in another."""
+    from facedyn.processors.training_inputs import take_skull_frame
+    from facedyn.usd.errors import TakeError
+
+    expected = model.info.get("skull_frame")
+    if expected is None:  # trained on takes without a rest mesh, or before models recorded it
+        return
+    found = take_skull_frame(perf)
+    if found != expected:
+        what = "has no actor's skull frame (a plain take stabilized without --actor)" if found is None else "is in another skull frame"
+        raise TakeError(f"{path}: the take {what}, not the one {model_path} was trained in; stabilize it with "
+                        "--actor ACTOR, the actor made from the rig or takes the model was trained on")
 
 
 def model_inputs(source, model_path: Path) -> list[str]:

@@ -3,7 +3,7 @@
 What happens to the output depends only on what the processor declares it writes:
 - a layer is written with its role and provenance and, with `--attach` (or an import's
   root), placed in the take root by role, under the root's lock;
-- a model file is saved atomically;
+- a file (a model, an actor asset) is saved atomically by the function the processor returns;
 - a folder is removed again when the run fails and the folder did not exist before.
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any
 
 import facedyn
 from facedyn.errors import UsageError
-from facedyn.processors.base import FolderOutput, LayerOutput, ModelOutput, Processor, Request
+from facedyn.processors.base import FileOutput, FolderOutput, LayerOutput, Processor, Request
 from facedyn.progress import Progress
 
 
@@ -41,15 +41,15 @@ def execute(processor: Processor, request: Request, progress: Progress, dry_run:
         return report
     writes = processor.writes.what
     created_folder = writes == "folder" and not request.output.exists()
-    if writes in ("folder", "model") and not request.output.parent.exists():
+    if writes in ("folder", "file") and not request.output.parent.exists():
         request.output.parent.mkdir(parents=True)
     try:
         output = processor.run(plan, progress)
         computed = time.perf_counter() - started
         if isinstance(output, LayerOutput):
             report.update(_write_layer(processor, request, output))
-        elif isinstance(output, ModelOutput):
-            report["output"] = str(_save_model(output.model, request.output))
+        elif isinstance(output, FileOutput):
+            report["output"] = str(output.save(request.output))
         elif not isinstance(output, FolderOutput):
             raise TypeError(f"{processor.name}.run returned {type(output).__name__}, not a declared output")
     except BaseException:
@@ -73,8 +73,8 @@ def _check_paths(processor: Processor, request: Request) -> None:
 
         check_output_paths(request.output, request.inputs, attach=request.attach,
                            root=_import_root(processor, request), role=processor.writes.role)
-    elif request.output.is_dir() and writes == "model":
-        raise UsageError(f"{request.output}: is a folder; -o names the model file to write")
+    elif request.output.is_dir() and writes == "file":
+        raise UsageError(f"{request.output}: is a folder; -o names the file to write")
     elif request.output.exists() and writes == "folder" and not request.output.is_dir():
         raise UsageError(f"{request.output}: is a file; -o names the folder to write")
     if request.attach is not None and writes != "layer":
@@ -110,12 +110,6 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
                                      frames=frames)
     report.update(root=str(root), sublayers=placed.sublayers, stale=placed.stale)
     return report
-
-
-def _save_model(model, path: Path) -> Path:
-    from facedyn.dynamics.modelfile import save_model
-
-    return save_model(model, path)
 
 
 def _plain(value: Any) -> Any:

@@ -7,6 +7,8 @@ captured world-space points.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from facedyn.errors import UsageError
@@ -39,6 +41,8 @@ class StabilizeProcessor(Processor):
         Parameter("method", str, "mode-pursuit", "mode-pursuit, or a baseline: three-point, procrustes, icp", METHODS),
         Parameter("solver", str, "fast", "mode pursuit's solver: fast, or reference (the paper's PyTorch formulation)", ("fast", "reference")),
         Parameter("init", str, "icp", "mode pursuit's initial alignment", ("identity", "three-point", "procrustes", "icp")),
+        Parameter("actor", Path, None, "an actor asset (usdfacedyn actor): solve against its neutral and rigid region, "
+                  "so the take lands in the actor's one skull frame", metavar="ACTOR"),
         Parameter("iterations", int, 12, "L-BFGS iterations per stage (the paper uses 12 or 24)", minimum=1, maximum=1000),
         Parameter("rest", str, "take", "rest mesh: the take's rest points (take), or estimated from the data (estimate)", ("take", "estimate")),
         Parameter("mask", str, "rigid", "vertices the solve uses: the take's rigid-region weights (rigid), or all", ("rigid", "all")),
@@ -55,11 +59,14 @@ class StabilizeProcessor(Processor):
         path = single_input(request)
         perf, source = read_take_below(path, self.writes.role, frames=request.frames)
         params = request.params
+        if params["actor"] is not None:
+            perf = with_actor(perf, params["actor"])
         weights, rest, three_point = _solve_inputs(perf, params)
         description = {
             "take": str(path), "frames": perf.frame_count, "points": perf.point_count, "method": params["method"],
             "solve_vertices": int(np.count_nonzero(weights)) if weights is not None else perf.point_count,
-            "rest": "the take's rest points" if rest is not None else "estimated from the data",
+            "rest": "estimated from the data" if rest is None else f"the actor's neutral ({params['actor']})" if params["actor"]
+            else "the take's rest points",
             "three_point": three_point,
         }
         return Plan(description, (perf, source, params, weights, rest, three_point))
@@ -82,7 +89,7 @@ class StabilizeProcessor(Processor):
             frames=perf.frames, mesh_path=source.mesh_path, skull_path=source.skull_path or source.mesh_path.rsplit("/", 1)[0],
             points=result.skull_points, skull_translate=result.translate, skull_orient=result.orient,
             solve_error=result.solve_error,
-            face=schema.FaceAttributes(role=self.writes.role, rest_points=result.rest.astype(np.float32)),
+            face=schema.FaceAttributes(role=self.writes.role, rest_points=result.rest.astype(np.float32), **_actor_setup(perf, params)),
             skull=schema.SkullAttributes(solver=params["method"], landmarks=perf.landmarks, reference_frame=float(perf.frames[0])),
         )
         summary = {
@@ -95,10 +102,33 @@ class StabilizeProcessor(Processor):
         return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.layer_identifiers), summary=summary)
 
 
+def with_actor(perf, actor_path: Path):
+    """The take with the actor's neutral as its rest and the actor's face setup (same topology required)."""
+    from facedyn.usd.actor import read_actor
+    from facedyn.usd.errors import TakeError
+
+    actor = read_actor(actor_path)
+    if actor.topology.fingerprint() != perf.topology.fingerprint():
+        raise TakeError(f"{actor_path}: the actor's mesh topology ({actor.topology.point_count} points) differs from the take's "
+                        f"({perf.point_count} points); an actor applies to takes tracked on its own mesh")
+    return perf.with_changes(rest_points=actor.neutral, rigid_weights=actor.rigid_weights, face_vertices=actor.face_vertices,
+                             skin_samples=actor.skin_samples, alignment_vertices=actor.alignment_vertices, landmarks=actor.landmarks)
+
+
+def _actor_setup(perf, params) -> dict:
+    """The actor's face setup, carried into the stabilized layer so later steps read it from the take."""
+    if params["actor"] is None:
+        return {}
+    return {"rigid_weights": perf.rigid_weights, "face_vertices": perf.face_vertices, "skin_samples": perf.skin_samples,
+            "alignment_vertices": perf.alignment_vertices}
+
+
 def _solve_inputs(perf, params):
     """Solve weights, rest mesh and three-point vertices from the take and the parameters."""
     from facedyn.usd.errors import TakeError
 
+    if params["actor"] is not None and params["rest"] == "estimate":
+        raise UsageError("--actor fixes the rest mesh (the actor's neutral defines the skull frame); leave out --rest estimate")
     weights = None
     if params["mask"] == "rigid" and perf.rigid_weights is not None and np.count_nonzero(perf.rigid_weights) >= 3:
         weights = perf.rigid_weights.astype(np.float64)

@@ -6,10 +6,12 @@ the remove processor.
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 from facedyn.errors import UsageError
-from facedyn.processors.base import ModelOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.training_inputs import TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths, validation_names
+from facedyn.processors.base import FileOutput, Parameter, Plan, Processor, Reads, Request, Writes
+from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths,
+                                                 training_skull_frame, validation_names)
 from facedyn.progress import Progress
 
 
@@ -18,7 +20,7 @@ class TrainRemovalProcessor(Processor):
     version = "1"
     summary = "train the removal network F on a corpus and write a model file"
     reads = Reads("takes", metavar="CORPUS", help="corpus folders (corpus.json), take folders or stabilized takes")
-    writes = Writes("model", metavar="MODEL", help="the model file to write (e.g. actor.removal)")
+    writes = Writes("file", metavar="MODEL", help="the model file to write (e.g. actor.removal)")
     parameters = (
         Parameter("epochs", int, 250, "training epochs (the paper trains 250)", minimum=1, maximum=100000),
         Parameter("subsample", float, 1.0, "fraction of the (frame, sample) pairs drawn each epoch", above=0.0, maximum=1.0),
@@ -42,8 +44,9 @@ class TrainRemovalProcessor(Processor):
                        "skull": params["skull"], "epochs": params["epochs"]}
         return Plan(description, (request, takes, truths))
 
-    def run(self, plan: Plan, progress: Progress) -> ModelOutput:
+    def run(self, plan: Plan, progress: Progress) -> FileOutput:
         from facedyn.dynamics.face import FaceSetup
+        from facedyn.dynamics.modelfile import save_model
         from facedyn.dynamics.skull_motion import NAMED
         from facedyn.dynamics.training import Take, TrainConfig, train_removal
 
@@ -59,9 +62,10 @@ class TrainRemovalProcessor(Processor):
         on_epoch, last = epoch_reporter(progress, f"train F ({len(takes)} takes)", config.epochs)
         model = train_removal(training, face, config, on_epoch, backend=params["backend"])
         progress.finish()
+        model.info["skull_frame"] = training_skull_frame(takes)
         model.info["training"]["skull"] = params["skull"]
         model.info["training"]["inputs"] = [str(p) for p in request.inputs]
-        return ModelOutput(model, training_summary(model, takes, face, last))
+        return FileOutput(partial(save_model, model), training_summary(model, takes, face, last))
 
 
 def training_summary(model, takes, face, last: dict) -> dict:

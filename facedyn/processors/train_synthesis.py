@@ -9,9 +9,12 @@ accelerations by default, the paper's velocities with `--skull-features velocity
 """
 from __future__ import annotations
 
-from facedyn.processors.base import ModelOutput, Parameter, Plan, Processor, Reads, Request, Writes
+from functools import partial
+
+from facedyn.processors.base import FileOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.processors.train_removal import training_summary
-from facedyn.processors.training_inputs import TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths, validation_names
+from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths,
+                                                 training_skull_frame, validation_names)
 from facedyn.progress import Progress
 
 
@@ -20,7 +23,7 @@ class TrainSynthesisProcessor(Processor):
     version = "1"
     summary = "train the synthesis network H on a corpus and write a model file"
     reads = Reads("takes", metavar="CORPUS", help="corpus folders (corpus.json), take folders or stabilized takes")
-    writes = Writes("model", metavar="MODEL", help="the model file to write (e.g. actor.synthesis)")
+    writes = Writes("file", metavar="MODEL", help="the model file to write (e.g. actor.synthesis)")
     parameters = (
         Parameter("quasistatic", str, help="a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes)",
                   metavar="MODEL|truth"),
@@ -54,7 +57,8 @@ class TrainSynthesisProcessor(Processor):
                        "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": params["epochs"]}
         return Plan(description, (request, takes, quasistatic, face))
 
-    def run(self, plan: Plan, progress: Progress) -> ModelOutput:
+    def run(self, plan: Plan, progress: Progress) -> FileOutput:
+        from facedyn.dynamics.modelfile import save_model
         from facedyn.dynamics.skull_motion import NAMED
         from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
         from facedyn.dynamics.training import Take
@@ -67,5 +71,6 @@ class TrainSynthesisProcessor(Processor):
         model = train_synthesis([Take.from_performance(perf, name) for name, perf in takes], face, takes[0][1].uvs,
                                 quasistatic, config, on_epoch, backend=params["backend"])
         progress.finish()
+        model.info["skull_frame"] = training_skull_frame(takes)
         model.info["training"].update(skull=params["skull"], inputs=[str(p) for p in request.inputs], quasistatic=params["quasistatic"])
-        return ModelOutput(model, {**training_summary(model, takes, face, last), "quasistatic": params["quasistatic"]})
+        return FileOutput(partial(save_model, model), {**training_summary(model, takes, face, last), "quasistatic": params["quasistatic"]})

@@ -45,7 +45,32 @@ def load_takes(inputs: list[Path], params: dict, progress: Progress) -> list:
         takes.append((name, perf))
         progress.advance()
     progress.finish()
+    training_skull_frame(takes)
     return takes
+
+
+def training_skull_frame(takes: list) -> str | None:
+    """The one skull frame every training take is in (None for takes without a rest mesh).
+
+    A network trained across takes in different skull frames learns their disagreement as
+    dynamics, so mixed frames are refused.
+    """
+    from facedyn.usd.errors import TakeError
+
+    frames = {name: take_skull_frame(perf) for name, perf in takes}
+    distinct = sorted(set(frames.values()), key=str)
+    if len(distinct) > 1:
+        by_frame = {frame: [n for n, f in frames.items() if f == frame] for frame in distinct}
+        listing = "; ".join(f"{', '.join(names[:3])}{'...' if len(names) > 3 else ''}" for names in by_frame.values())
+        raise TakeError(f"the training takes are in {len(distinct)} different skull frames ({listing}); stabilize every take "
+                        "of the actor with --actor ACTOR so they share one")
+    return distinct[0]
+
+
+def take_skull_frame(perf) -> str | None:
+    from facedyn.performance import skull_frame_id
+
+    return skull_frame_id(perf.rest_points, perf.topology) if perf.rest_points is not None else None
 
 
 def validation_names(params: dict) -> tuple[str, ...] | None:

@@ -6,7 +6,7 @@ from facedyn.errors import UsageError
 from facedyn.processors import registry
 from facedyn.processors.base import Parameter, Reads, Writes
 
-BUILT_IN = ("import", "stabilize", "remove", "synthesize", "retarget", "preview", "synth", "train-removal", "train-synthesis", "demo")
+BUILT_IN = ("import", "stabilize", "remove", "synthesize", "retarget", "preview", "synth", "train-removal", "train-synthesis", "demo", "actor")
 
 
 def run(argv, capsys):
@@ -22,7 +22,7 @@ def test_every_built_in_command_is_a_declared_processor():
         processor = registry.load(name)
         assert isinstance(processor.reads, Reads) and isinstance(processor.writes, Writes)
         assert processor.writes.role == roles.get(name)
-        assert processor.writes.what == ("layer" if name in roles else "model" if name.startswith("train") else "folder")
+        assert processor.writes.what == ("layer" if name in roles else "file" if name.startswith("train") or name == "actor" else "folder")
         given = {p.name: p.parse("x") for p in processor.parameters if p.required}
         resolved = processor.resolve_params(given)
         assert set(resolved) == {p.name for p in processor.parameters}

@@ -1,0 +1,91 @@
+"""Actors: one skull frame per actor, from a rig, a neutral, or (with the rigidity estimate) takes."""
+import numpy as np
+import pytest
+
+from facedyn.cli import main
+from facedyn.sim.corpus import TakeSpec, simulate_take
+from facedyn.sim.default_face import default_face
+from facedyn.usd.actor import read_actor
+from facedyn.usd.rig import write_blendshape_rig
+from facedyn.usd.take import read_take
+
+from usd_fixtures import write_mesh_cache
+
+
+def cli(*argv):
+    return main([str(a) for a in argv] + ["-q"])
+
+
+@pytest.fixture(scope="module")
+def rig_and_takes(tmp_path_factory):
+    """The built-in face as a UsdSkel rig, and a held smile under a walk and under a hop as plain caches
+    (metres, Z up, first frame 1001: nothing but points)."""
+    folder = tmp_path_factory.mktemp("actor")
+    rig = default_face(12)
+    rig_path = write_blendshape_rig(rig, folder / "rig.usda")
+    caches = {}
+    for motion, seed in (("walk", 1), ("hop", 2)):
+        take = simulate_take(rig, TakeSpec(f"smile_{motion}", motion, "smile", duration_s=1.0, seed=seed, noise_cm=0.002))
+        world = take.world_points().astype(np.float64)
+        z_up_metres = np.stack([world[..., 0], -world[..., 2], world[..., 1]], axis=-1) / 100.0
+        counts, indices = rig.topology.face_vertex_counts, rig.topology.face_vertex_indices
+        caches[motion] = (write_mesh_cache(folder / f"{motion}.usda", z_up_metres, counts, indices, up_axis="Z", meters_per_unit=1.0), take)
+    return folder, rig, rig_path, caches
+
+
+def test_actor_from_a_rig_keeps_the_rigs_space(rig_and_takes, tmp_path):
+    _, rig, rig_path, _ = rig_and_takes
+    assert cli("actor", rig_path, "-o", tmp_path / "actor.usda") == 0
+    actor = read_actor(tmp_path / "actor.usda")
+    np.testing.assert_allclose(actor.neutral, rig.neutral, atol=1e-5)
+    np.testing.assert_allclose(actor.rigid_weights, rig.rigid_weights, atol=1e-6)
+    assert actor.source == "rig" and actor.skin_samples is not None and len(actor.landmarks) >= 3
+    assert actor.topology.fingerprint() == rig.topology.fingerprint()
+    assert cli("actor", rig_path, "-o", tmp_path / "actor.txt") == 2
+
+
+def test_two_takes_of_one_held_expression_share_the_actors_skull_frame(rig_and_takes, tmp_path):
+    folder, rig, rig_path, caches = rig_and_takes
+    assert cli("actor", rig_path, "-o", tmp_path / "actor.usda") == 0
+    shapes = {}
+    for motion, (cache, take) in caches.items():
+        shot = tmp_path / motion
+        shot.mkdir()
+        assert cli("import", cache, "-o", shot / "capture.usdc") == 0
+        assert cli("stabilize", shot / "take.usda", "-o", shot / "stabilized.usdc", "--attach", shot / "take.usda",
+                   "--actor", tmp_path / "actor.usda") == 0
+        perf, _ = read_take(shot / "take.usda")
+        # The skin in skull space is the actor's (the rig's) space: compare with the truth directly.
+        truth_skull = take.quasistatic + take.offsets
+        error = np.linalg.norm(perf.points - truth_skull, axis=-1)[:, rig.face_vertices]
+        assert np.median(error) < 0.01, np.median(error)
+        shapes[motion] = perf.points
+    # The same held expression under two motions lands in one skull frame: the parts that follow the skull sit at
+    # the same skull-space place in both takes, to within the tracking noise (the soft parts differ by the
+    # motion's own jiggle and the sag of a tilted head, which the simulator counts as quasistatic).
+    rigid = np.flatnonzero(rig.rigid_weights >= 0.99)
+    mean_difference = np.linalg.norm(shapes["walk"].mean(0) - shapes["hop"].mean(0), axis=-1)[rigid]
+    assert np.median(mean_difference) < 0.002, np.median(mean_difference)
+
+
+def test_models_refuse_takes_in_another_skull_frame(rig_and_takes, tmp_path, capsys):
+    from facedyn.processors.remove import check_skull_frame
+    from facedyn.processors.training_inputs import take_skull_frame
+    from facedyn.usd.errors import TakeError
+
+    _, rig, rig_path, caches = rig_and_takes
+    cache, _ = caches["walk"]
+    assert cli("import", cache, "-o", tmp_path / "capture.usdc") == 0
+    assert cli("stabilize", tmp_path / "take.usda", "-o", tmp_path / "stabilized.usdc", "--attach", tmp_path / "take.usda",
+               "--rest", "estimate") == 0
+    plain, _ = read_take(tmp_path / "take.usda")
+
+    class Model:
+        info = {"skull_frame": take_skull_frame(plain.with_changes(rest_points=rig.neutral))}
+
+    with pytest.raises(TakeError, match="another skull frame.*--actor"):
+        check_skull_frame(tmp_path / "take.usda", plain, "f.removal", Model())
+    with pytest.raises(TakeError, match="plain take stabilized without --actor"):
+        check_skull_frame(tmp_path / "take.usda", plain.with_changes(rest_points=None), "f.removal", Model())
+    check_skull_frame(tmp_path / "take.usda", plain.with_changes(rest_points=rig.neutral), "f.removal", Model())
+    assert cli("stabilize", tmp_path / "take.usda", "-o", tmp_path / "s2.usdc", "--actor", tmp_path / "none.usda") == 1
