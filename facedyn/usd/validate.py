@@ -65,7 +65,8 @@ def stack_findings(root: Path) -> list[Finding]:
     """The root's layers: listed once, present, in role order, covering the take, fed by what they read, fresh."""
     findings = []
     seen = {}
-    for asset in open_root(root).subLayerPaths:
+    root_layer = open_root(root)
+    for asset in root_layer.subLayerPaths:
         path = resolve_asset_path(asset, root.parent)
         if path == root.resolve():
             findings.append(Finding("error", "facedyn:LayerStack", f"{root}: lists itself ({asset}) among its subLayers"))
