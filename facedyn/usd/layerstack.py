@@ -21,6 +21,7 @@ from facedyn.usd.runs import facedyn_metadata
 from facedyn.usd.stage import resolve_asset_path
 
 TAKE_ROOT = "take"  # the role a take root records: it lists layers and is none of them
+CAPTURED = "captured"  # the base role: the capture every other layer is computed over; it sets the take's frames
 LEGACY_PROCESSOR_ROLES = {
     "import": "captured",
     "stabilize": "stabilized",
@@ -122,7 +123,7 @@ def result_layers(stage: Usd.Stage, role_names: set[str] | frozenset[str] | None
     found = []
     for layer in stage.GetLayerStack(includeSessionLayers=False):
         name = recorded_role_name(layer_metadata(layer))
-        if name and (name in role_names if role_names is not None else name != "captured"):
+        if name and (name in role_names if role_names is not None else name != CAPTURED):
             found.append(layer.identifier)
     return found
 

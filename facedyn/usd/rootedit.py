@@ -24,7 +24,7 @@ from facedyn.errors import UsageError
 from facedyn.performance import role as find_role
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layers import check_writable, export_atomically, new_take_root
-from facedyn.usd.layerstack import Entry, effective_ranks, place, recorded_role_name
+from facedyn.usd.layerstack import CAPTURED, Entry, effective_ranks, place, recorded_role_name
 from facedyn.usd.runs import facedyn_metadata
 from facedyn.usd.stackstatus import MUTED_KEY, frame_range, muted_assets, open_root, read_entries, stack_status, take_frames
 from facedyn.usd.stage import relative_asset_path, resolve_asset_path
@@ -143,7 +143,7 @@ def _attach(root: Path, layer_path: Path, role_name: str | None, create_with: Ti
     entries = read_entries(layer, root.parent)
     layer_frames = frame_range(data)
     take = take_frames(layer, entries)
-    if take is not None and layer_frames is not None and role.name != "captured" and (layer_frames[0] > take[0] or layer_frames[1] < take[1]):
+    if take is not None and layer_frames is not None and role.name != CAPTURED and (layer_frames[0] > take[0] or layer_frames[1] < take[1]):
         raise TakeError(
             f"{layer_path}: covers frames {layer_frames[0]:g}:{layer_frames[1]:g} but the take {root} covers "
             f"{take[0]:g}:{take[1]:g}; composed over it, the frames it lacks would hold its last value. "
@@ -200,17 +200,21 @@ def _editing(root: str | os.PathLike) -> Iterator[Sdf.Layer]:
         export_atomically(layer, root)
 
 
-def _find(name: str | os.PathLike, assets: list[str], root: Path, where: str) -> int:
-    """The index in assets of the layer called name: an entry as written, or a file path."""
+def _lookup(name: str | os.PathLike, assets: list[str], root: Path) -> int | None:
+    """The index in assets of the layer called name (an entry as written, or a file path), or None."""
     text = str(name)
     if text in assets:
         return assets.index(text)
     wanted = {Path(text).resolve(), resolve_asset_path(text, root.parent)}
-    for i, asset in enumerate(assets):
-        if resolve_asset_path(asset, root.parent) in wanted:
-            return i
-    listed = ", ".join(assets) or "none"
-    raise UsageError(f"{root}: no layer {text} in its {where} (they are: {listed})")
+    return next((i for i, asset in enumerate(assets) if resolve_asset_path(asset, root.parent) in wanted), None)
+
+
+def _find(name: str | os.PathLike, assets: list[str], root: Path, where: str) -> int:
+    """_lookup, or a UsageError listing what there is."""
+    index = _lookup(name, assets, root)
+    if index is None:
+        raise UsageError(f"{root}: no layer {name} in its {where} (they are: {', '.join(assets) or 'none'})")
+    return index
 
 
 def mute(root: str | os.PathLike, layer: str | os.PathLike) -> list[str]:
@@ -249,12 +253,12 @@ def detach(root: str | os.PathLike, layer: str | os.PathLike) -> list[str]:
     """Remove a layer from root (from its subLayers, or from its muted layers); return the subLayers."""
     root = Path(root)
     with _editing(root) as edited:
-        assets = list(edited.subLayerPaths)
-        try:
-            assets.pop(_find(layer, assets, root, "subLayers"))
+        assets, muted = list(edited.subLayerPaths), muted_assets(edited)
+        index = _lookup(layer, assets, root)
+        if index is not None:
+            assets.pop(index)
             edited.subLayerPaths = assets
-        except UsageError:
-            muted = muted_assets(edited)
+        else:
             muted.pop(_find(layer, muted, root, "subLayers or muted layers"))
             _set_muted(edited, muted)
     return assets

@@ -16,7 +16,7 @@ from pxr import Sdf, Tf, Usd
 
 from facedyn.performance import roles
 from facedyn.usd.errors import TakeError
-from facedyn.usd.layerstack import Entry, effective_ranks
+from facedyn.usd.layerstack import CAPTURED, Entry, effective_ranks
 from facedyn.usd.runs import current_run
 from facedyn.usd.schema import recorded_inputs
 from facedyn.usd.stage import relative_asset_path, resolve_asset_path
@@ -109,7 +109,7 @@ def frame_range(data: dict | None) -> tuple[float, float] | None:
 
 def take_frames(root_layer: Sdf.Layer, entries: list[Entry]) -> tuple[float, float] | None:
     """The take's frames: its capture's (the weakest captured layer), else the root's time codes."""
-    captured = [e for e in entries if e.role_name == "captured" and frame_range(e.metadata)]
+    captured = [e for e in entries if e.role_name == CAPTURED and frame_range(e.metadata)]
     if captured:
         return frame_range(captured[-1].metadata)
     if root_layer.HasStartTimeCode() and root_layer.HasEndTimeCode():
