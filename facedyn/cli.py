@@ -272,27 +272,23 @@ def _cmd_inspect(args) -> int:
 
 def _cmd_layers(args) -> int:
     from facedyn.errors import UsageError
-    from facedyn.usd import layerstack
+    from facedyn.usd import rootedit
+    from facedyn.usd.stackstatus import format_layers, stack_status
 
     if (args.above or args.below) and not args.move:
         raise UsageError("--above/--below go with --move LAYER")
     if args.move and bool(args.above) == bool(args.below):
         raise UsageError("--move LAYER needs one of --above OTHER or --below OTHER")
     if args.mute:
-        layerstack.mute(args.take, args.mute)
+        rootedit.mute(args.take, args.mute)
     elif args.unmute:
-        layerstack.unmute(args.take, args.unmute)
+        rootedit.unmute(args.take, args.unmute)
     elif args.detach:
-        layerstack.detach(args.take, args.detach)
+        rootedit.detach(args.take, args.detach)
     elif args.move:
-        layerstack.move(args.take, args.move, above=args.above, below=args.below)
-    rows = [status.as_dict() for status in layerstack.stack_status(args.take)]
-    if args.json:
-        print(json.dumps(rows, indent=2, default=str))
-        return EXIT_OK
-    for i, row in enumerate(rows):
-        state = "muted" if row["muted"] else ("STALE: " + row["stale_reason"]) if row["stale"] else "current"
-        print(f"{i}. {row['layer']:<36} {row['role'] or '-':<12} {row['processor'] or '-':<16} {state}")
+        rootedit.move(args.take, args.move, above=args.above, below=args.below)
+    statuses = stack_status(args.take)
+    print(json.dumps([status.as_dict() for status in statuses], indent=2, default=str) if args.json else format_layers(statuses))
     return EXIT_OK
 
 

@@ -39,14 +39,15 @@ class Role:
     label: str  # what a menu calls the layers of this role
     variants: bool = False  # several layers of this role may coexist
     face_role: bool = True  # False: an overlay (e.g. heat maps) that leaves the face's role alone
+    reads: str | None = None  # the role that must lie below a layer of this role (what it is computed from)
 
 
 BUILTIN_ROLES = (
     Role("captured", 0, "capture"),
-    Role("stabilized", 10, "stabilized layers"),
-    Role("quasistatic", 20, "quasistatic layers"),
-    Role("synthesized", 30, "synthesized layers", variants=True),
-    Role("retargeted", 30, "retargeted layers", variants=True),
+    Role("stabilized", 10, "stabilized layers", reads="captured"),
+    Role("quasistatic", 20, "quasistatic layers", reads="stabilized"),
+    Role("synthesized", 30, "synthesized layers", variants=True, reads="quasistatic"),
+    Role("retargeted", 30, "retargeted layers", variants=True, reads="quasistatic"),
     Role("preview", 40, "heat map", variants=True, face_role=False),
 )
 ROLE_GROUP = "facedyn.roles"

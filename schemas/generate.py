@@ -5,7 +5,9 @@
 
 usdGenSchema leaves build-system placeholders in plugInfo.json (a C++ build fills them in);
 a codeless schema shipped as plain files needs them resolved, which this script does after
-running `python -m pxr.Usd.usdGenSchema` (needs jinja2).
+running `python -m pxr.Usd.usdGenSchema` (needs jinja2). The face role tokens come from the
+one role table, facedyn.performance.BUILTIN_ROLES, filled into schema.usda's "@FACE_ROLES@"
+before generation.
 """
 from __future__ import annotations
 
@@ -14,6 +16,8 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from facedyn.performance import BUILTIN_ROLES
 
 HERE = Path(__file__).resolve().parent
 SCHEMA = HERE / "schema.usda"
@@ -26,15 +30,27 @@ PLACEHOLDERS = {
 }
 
 
+FACE_ROLES_PLACEHOLDER = '"@FACE_ROLES@"'
+
+
+def filled_schema() -> str:
+    """schema.usda with the face role tokens of the role table filled in."""
+    tokens = ", ".join(f'"{role.name}"' for role in BUILTIN_ROLES if role.face_role)
+    return SCHEMA.read_text().replace(FACE_ROLES_PLACEHOLDER, tokens)
+
+
 def generate(out_dir: Path) -> None:
     """Run usdGenSchema into out_dir and resolve plugInfo.json's placeholders."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    subprocess.run(
-        [sys.executable, "-m", "pxr.Usd.usdGenSchema", str(SCHEMA), str(out_dir)],
-        check=True,
-        cwd=HERE,
-        stdout=subprocess.DEVNULL,
-    )
+    with tempfile.TemporaryDirectory() as tmp:
+        source = Path(tmp) / SCHEMA.name
+        source.write_text(filled_schema())
+        subprocess.run(
+            [sys.executable, "-m", "pxr.Usd.usdGenSchema", str(source), str(out_dir)],
+            check=True,
+            cwd=HERE,
+            stdout=subprocess.DEVNULL,
+        )
     plug_info = out_dir / "plugInfo.json"
     text = plug_info.read_text()
     for placeholder, value in PLACEHOLDERS.items():

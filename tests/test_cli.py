@@ -141,8 +141,11 @@ def test_bad_inputs_are_one_line_errors_and_leave_nothing(tmp_path, grid_cache, 
     code, _, err = run(["import", cache, "-o", cache], capsys)
     _assert_clean_failure(code, err, 2, "overwrite an input")
 
-    code, _, err = run(["import", cache, "-o", tmp_path / "nowhere" / "c.usdc"], capsys)
-    _assert_clean_failure(code, err, 1, "does not exist")
+    code, _, err = run(["import", junk, "-o", tmp_path / "nowhere" / "deeper" / "c.usdc"], capsys)
+    _assert_clean_failure(code, err, 1, "junk.usda")
+    assert not (tmp_path / "nowhere").exists()  # a failed run leaves no folder it made
+    code, _, err = run(["import", cache, "-o", tmp_path / "made" / "c.usdc", "-q"], capsys)
+    assert code == 0 and (tmp_path / "made" / "c.usdc").is_file() and (tmp_path / "made" / "take.usda").is_file()
 
     assert list(out.iterdir()) == []
 

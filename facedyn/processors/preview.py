@@ -50,4 +50,4 @@ class PreviewProcessor(Processor):
                              skull_path=source.skull_path or str(Path(source.mesh_path).parent),
                              display_color=colours, face=schema.FaceAttributes(role=None))
         summary = {"range_mm": used_range_mm, "peak_normal_offset_mm": round(float(np.abs(signed).max()), 2)}
-        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.layer_identifiers), summary=summary)
+        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.inputs), summary=summary)

@@ -57,7 +57,6 @@ class RemoveProcessor(Processor):
 def read_with_model(request: Request, role_name: str, kind: str):
     """The take below `role_name` and a model of `kind` that fits it (topology, frame rate)."""
     from facedyn.dynamics.modelfile import load_model
-    from facedyn.usd.errors import TakeError
     from facedyn.usd.take import read_take_below
 
     path = single_input(request)
@@ -65,11 +64,6 @@ def read_with_model(request: Request, role_name: str, kind: str):
     model = load_model(request.params["model"], topology=perf.topology, fps=perf.fps)
     if model.kind != kind:
         raise UsageError(f"--model {request.params['model']}: a {model.kind} model; this step needs a {kind} model")
-    needed = "stabilized" if role_name == "quasistatic" else "quasistatic"
-    if perf.role != needed or source.skull_path is None:
-        step = "stabilize" if needed == "stabilized" else "remove"
-        raise TakeError(f"{path}: below its {role_name} layers {source.mesh_path} is {perf.role}, not {needed}; "
-                        f"run `usdfacedyn {step}` first")
     check_skull_frame(path, perf, request.params["model"], model)
     return perf, source, model
 
@@ -91,7 +85,7 @@ def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:
 
 def model_inputs(source, model_path: Path) -> list[str]:
     """The provenance inputs of a layer computed from a take and a model file."""
-    return list(source.layer_identifiers) + [str(Path(model_path).resolve())]
+    return list(source.inputs) + [str(Path(model_path).resolve())]
 
 
 def offset_summary(offsets: np.ndarray, what: str) -> dict:

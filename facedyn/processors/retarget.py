@@ -48,9 +48,9 @@ class RetargetProcessor(Processor):
             path = single_input(request)
             perf, source = read_take_below(path, self.writes.role, frames=request.frames)
             model = None
-            if perf.role != "quasistatic":
-                raise TakeError(f"{path}: {source.mesh_path} is {perf.role}, not quasistatic; run `usdfacedyn remove` first")
-        a, _ = read_take_below(params["source"], self.writes.role)
+        # Actor A's skull motion is its stabilized take (below any quasistatic layer); its offsets, for
+        # delta-transfer, are its quasistatic take's (below any synthesized variant).
+        a, _ = read_take_below(params["source"], "quasistatic" if params["method"] == "synthesis" else "synthesized")
         if a.skull_orient is None:
             raise TakeError(f"{params['source']}: actor A's take has no solved skull motion (stabilize it first)")
         if a.point_count != perf.point_count:

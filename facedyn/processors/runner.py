@@ -5,6 +5,7 @@ What happens to the output depends only on what the processor declares it writes
   root), placed in the take root by role, under the root's lock;
 - a file (a model, an actor asset) is saved atomically by the function the processor returns;
 - a folder is removed again when the run fails and the folder did not exist before.
+Missing folders of the output are created (and removed again if the run fails).
 """
 from __future__ import annotations
 
@@ -41,8 +42,7 @@ def execute(processor: Processor, request: Request, progress: Progress, dry_run:
         return report
     writes = processor.writes.what
     created_folder = writes == "folder" and not request.output.exists()
-    if writes in ("folder", "file") and not request.output.parent.exists():
-        request.output.parent.mkdir(parents=True)
+    made = _make_folders(request.output.parent)
     try:
         output = processor.run(plan, progress)
         computed = time.perf_counter() - started
@@ -55,10 +55,26 @@ def execute(processor: Processor, request: Request, progress: Progress, dry_run:
     except BaseException:
         if created_folder and request.output.is_dir():
             shutil.rmtree(request.output, ignore_errors=True)
+        for folder in reversed(made):  # the output's missing folders, made for this run
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
         raise
     report["summary"] = output.summary
     report["seconds"] = {"compute": round(computed, 3), "total": round(time.perf_counter() - started, 3)}
     return report
+
+
+def _make_folders(folder: Path) -> list[Path]:
+    """Create an output's missing folders (outermost first), as `mkdir -p` would; return the ones made."""
+    from facedyn.errors import FacedynError
+
+    missing = [p for p in [folder, *folder.parents] if not p.exists()][::-1]
+    for path in missing:
+        try:
+            path.mkdir()
+        except OSError as exc:
+            raise FacedynError(f"{folder}: cannot create the output folder ({exc.strerror})") from None
+    return missing
 
 
 def _check_paths(processor: Processor, request: Request) -> None:
@@ -69,7 +85,7 @@ def _check_paths(processor: Processor, request: Request) -> None:
             raise UsageError(f"{request.output}: the output would overwrite an input; choose another -o")
     writes = processor.writes.what
     if writes == "layer":
-        from facedyn.usd.layers import check_output_paths
+        from facedyn.usd.outputs import check_output_paths
 
         check_output_paths(request.output, request.inputs, attach=request.attach,
                            root=_import_root(processor, request), role=processor.writes.role)
@@ -87,27 +103,36 @@ def _import_root(processor: Processor, request: Request) -> Path | None:
 
 
 def _write_layer(processor: Processor, request: Request, output: LayerOutput) -> dict[str, Any]:
+    from facedyn.errors import UsageError
     from facedyn.usd import layers, schema
+    from facedyn.usd.rootedit import attach_written_layer
+    from facedyn.usd.stackstatus import covers_take
 
     frames = output.layer.frames
+    first, last = float(frames[0]), float(frames[-1])
     provenance = schema.Provenance(
         processor=processor.name,
         version=f"facedyn {facedyn.__version__}, {processor.name} {processor.version}",
         parameters={k: _plain(v) for k, v in request.params.items()},
-        frame_range=(float(frames[0]), float(frames[-1])),
+        frame_range=(first, last),
         inputs=output.inputs,
+        role=processor.writes.role,
     )
     root = output.root or request.attach
 
     def write():
         layers.write_layer(request.output, output.layer, output.timing, provenance, define=output.define)
 
-    report: dict[str, Any] = {"frame_count": int(len(frames)), "frame_range": [float(frames[0]), float(frames[-1])]}
+    report: dict[str, Any] = {"frame_count": int(len(frames)), "frame_range": [first, last]}
     if root is None:
         write()
         return report
-    placed = layers.write_and_attach(Path(root), request.output, processor.writes.role, write, timing=output.timing,
-                                     frames=frames)
+    root = Path(root)
+    if root.exists() and not covers_take(root, (first, last)):
+        raise UsageError(f"--frames {first:g}:{last:g} covers only part of {root}'s frames; attached, the layer would hold its "
+                         "last sample over the rest of the take. Process the whole take, or leave out --attach")
+    placed = attach_written_layer(root, request.output, processor.writes.role, write,
+                                  create_with=output.timing if output.define else None)
     report.update(root=str(root), sublayers=placed.sublayers, stale=placed.stale)
     return report
 

@@ -99,7 +99,7 @@ class StabilizeProcessor(Processor):
         if result.energy is not None:
             summary["final_energy"] = round(float(result.energy), 3)
             summary["backend"] = result.backend
-        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.layer_identifiers), summary=summary)
+        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.inputs), summary=summary)
 
 
 def with_actor(perf, actor_path: Path):

@@ -64,5 +64,5 @@ def synthesized_output(perf, source, model_path, points, offsets, translate, ori
         skull_translate=translate, skull_orient=orient, face=schema.FaceAttributes(role=role_name),
         skull=schema.SkullAttributes(solver="resampled", landmarks=perf.landmarks),
     )
-    inputs = model_inputs(source, model_path) if model_path else list(source.layer_identifiers)
+    inputs = model_inputs(source, model_path) if model_path else list(source.inputs)
     return LayerOutput(layer=layer, timing=source.timing, inputs=inputs, summary={**extra, **offset_summary(offsets, "synthesized")})

@@ -1,4 +1,4 @@
-"""`usdfacedyn inspect`: what a take is made of, strongest layer first."""
+"""`usdfacedyn inspect`: what a take is made of, strongest layer first, with each layer's role and staleness."""
 from __future__ import annotations
 
 import json
@@ -8,7 +8,8 @@ from pathlib import Path
 from pxr import Sdf, UsdGeom
 
 from facedyn.usd import schema
-from facedyn.usd.layerstack import layer_role
+from facedyn.usd.layerstack import is_take_root, layer_metadata, recorded_role_name
+from facedyn.usd.stackstatus import LayerStatus, stack_status
 from facedyn.usd.stage import open_stage
 from facedyn.usd.take import find_face_mesh
 
@@ -26,8 +27,14 @@ def describe_take(path: str | os.PathLike) -> dict:
             "metersPerUnit": UsdGeom.GetStageMetersPerUnit(stage),
             "upAxis": str(UsdGeom.GetStageUpAxis(stage)),
         },
-        "layers": [_describe_layer(layer) for layer in stage.GetLayerStack(includeSessionLayers=False)],
     }
+    statuses = stack_status(path) if is_take_root(stage.GetRootLayer()) else []
+    by_path = {s.path: s for s in statuses}
+    description["layers"] = [
+        _describe_layer(layer, by_path.get(Path(layer.realPath).resolve()) if layer.realPath else None)
+        for layer in stage.GetLayerStack(includeSessionLayers=False)
+    ]
+    description["mutedOnDisk"] = [s.asset for s in statuses if s.muted]
     face = find_face_mesh(stage)
     mesh = UsdGeom.Mesh(face)
     points_attr = mesh.GetPointsAttr()
@@ -49,8 +56,8 @@ def describe_take(path: str | os.PathLike) -> dict:
     return description
 
 
-def _describe_layer(layer: Sdf.Layer) -> dict:
-    data = dict(layer.customLayerData).get("facedyn", {})
+def _describe_layer(layer: Sdf.Layer, status: LayerStatus | None) -> dict:
+    data = layer_metadata(layer) or {}
     entry = {
         "layer": layer.realPath or layer.identifier,
         "processor": data.get("processor", data.get("role", "")),
@@ -58,7 +65,11 @@ def _describe_layer(layer: Sdf.Layer) -> dict:
         "frameRange": list(data["frameRange"]) if "frameRange" in data else None,
         "inputs": list(data.get("inputs", [])),
         "parameters": json.loads(data["parameters"]) if "parameters" in data else {},
-        "role": layer_role(layer),
+        "role": recorded_role_name(data) or "",
+        "run": data.get("run", ""),
+        "stale": bool(status and status.stale),
+        "staleReason": status.reason if status else "",
+        "coversTake": status.covers if status else True,
     }
     return entry
 
@@ -82,7 +93,12 @@ def format_description(d: dict) -> str:
             detail += f", frames {layer['frameRange'][0]:g}..{layer['frameRange'][1]:g}"
         if layer["version"]:
             detail += f", {layer['version']}"
+        if not layer["coversTake"]:
+            detail += " (fewer frames than the take)"
         lines.append(f"  {i}. {name:<32} {what:<12} {detail.lstrip(', ')}")
+        if layer["stale"]:
+            lines.append(f"       STALE: {layer['staleReason']}")
         if layer["parameters"]:
             lines.append(f"       parameters: {json.dumps(layer['parameters'], sort_keys=True)}")
+    lines += [f"  muted on disk: {asset}" for asset in d.get("mutedOnDisk", [])]
     return "\n".join(lines)

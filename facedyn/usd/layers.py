@@ -16,9 +16,11 @@ from pathlib import Path
 import numpy as np
 from pxr import Gf, Kind, Sdf, Tf, Usd, UsdGeom, Vt
 
-from facedyn.performance import UVs, Topology
+from facedyn.performance import UVs, Topology, roles
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
+from facedyn.usd.layerstack import LEGACY_PROCESSOR_ROLES, TAKE_ROOT
+from facedyn.usd.stage import relative_asset_path
 from facedyn.usd.timing import Timing
 
 PERFORMANCE_PATH = "/Performance"
@@ -52,18 +54,23 @@ def write_layer(
     provenance: schema.Provenance,
     define: bool = False,
 ) -> Path:
-    """Write `content` as a layer at `path` (atomically) and return the path."""
+    """Write `content` as a layer at `path` (atomically) and return the path.
+
+    The layer records its run (schema.RunRecord): processor, role, parameters, frames and
+    inputs relative to `path`, each with its run id, so the same inputs give the same bytes.
+    """
     path = Path(path)
     check_writable(path)
     _check_shapes(content)
+    record = provenance.record(path.parent, layer_role(provenance, content))
     layer = Sdf.Layer.CreateAnonymous(path.suffix)
     frames = np.asarray(content.frames, dtype=np.float64)
     timing.with_frames(float(frames[0]), float(frames[-1])).apply(layer)
-    layer.customLayerData = {"facedyn": provenance.as_dict()}
+    layer.customLayerData = {"facedyn": record.as_dict()}
     stage = Usd.Stage.Open(layer)
     layer.defaultPrim = Sdf.Path(content.skull_path).GetPrefixes()[0].name
     mesh_prim, skull_prim = _author_prims(stage, content, define)
-    _author_static(mesh_prim, skull_prim, content, provenance)
+    _author_static(mesh_prim, skull_prim, content, record)
     _author_time_samples(layer, mesh_prim.GetPath(), skull_prim.GetPath() if skull_prim else None, content)
     export_atomically(layer, path)
     return path
@@ -82,7 +89,7 @@ def _author_prims(stage: Usd.Stage, content: LayerContent, define: bool):
     return mesh_prim, skull_prim
 
 
-def _author_static(mesh_prim: Usd.Prim, skull_prim: Usd.Prim, content: LayerContent, provenance) -> None:
+def _author_static(mesh_prim: Usd.Prim, skull_prim: Usd.Prim, content: LayerContent, record: schema.RunRecord) -> None:
     types = Sdf.ValueTypeNames
     has_skull_motion = content.skull_translate is not None or content.skull_orient is not None
     if content.skull is not None or has_skull_motion:
@@ -118,7 +125,15 @@ def _author_static(mesh_prim: Usd.Prim, skull_prim: Usd.Prim, content: LayerCont
         )
     if content.display_color is not None:
         UsdGeom.PrimvarsAPI(mesh_prim).CreatePrimvar("displayColor", types.Color3fArray, UsdGeom.Tokens.vertex)
-    provenance.write(mesh_prim)
+    record.write(mesh_prim)
+
+
+def layer_role(provenance: schema.Provenance, content: LayerContent) -> str:
+    """The role a layer records: the provenance's, else its processor's (older callers), else its face's."""
+    name = provenance.role or LEGACY_PROCESSOR_ROLES.get(provenance.processor) or content.face.role
+    if name not in roles():
+        raise TakeError(f"{provenance.processor}: cannot write a layer of role {name!r}; known roles: {', '.join(roles())}")
+    return name
 
 
 def _author_time_samples(layer: Sdf.Layer, mesh_path: Sdf.Path, skull_path: Sdf.Path | None, content: LayerContent) -> None:
@@ -209,75 +224,29 @@ def _umask() -> int:
     return mask
 
 
-def relative_asset_path(target: Path, anchor_dir: Path) -> str:
-    """target as a path relative to anchor_dir, in USD's './x' form when possible."""
-    rel = os.path.relpath(Path(target).resolve(), Path(anchor_dir).resolve())
-    rel = rel.replace(os.sep, "/")
-    return rel if rel.startswith("../") else "./" + rel
-
-
-def write_take_root(root: Path, sublayers: list[Path], timing: Timing) -> Path:
-    """Write a shot root (.usda) whose subLayers are `sublayers`, strongest first."""
-    check_writable(root)
+def new_take_root(timing: Timing) -> Sdf.Layer:
+    """An empty take root (in memory): the take's timing, defaultPrim, and the take-root marker."""
     layer = Sdf.Layer.CreateAnonymous(".usda")
     timing.apply(layer)
     layer.defaultPrim = PERFORMANCE_PATH.strip("/")
+    layer.customLayerData = {"facedyn": {"role": TAKE_ROOT}}
+    return layer
+
+
+def write_take_root(root: Path, sublayers: list[Path], timing: Timing) -> Path:
+    """Write a new shot root (.usda) whose subLayers are `sublayers`, strongest first, as given."""
+    check_writable(root)
+    layer = new_take_root(timing)
     layer.subLayerPaths = [relative_asset_path(p, root.parent) for p in sublayers]
-    layer.customLayerData = {"facedyn": {"role": "take"}}
     export_atomically(layer, root)
     return root
 
 
 def attach(root: Path, layer_path: Path) -> list[str]:
-    """Add layer_path to root's subLayers as the strongest layer (once) and rewrite root atomically."""
-    return _insert_sublayer(root, layer_path, strongest=True)
+    """rootedit.attach for callers that want only the new subLayers (the runner, until it reports more)."""
+    from facedyn.usd.rootedit import attach as attach_by_role  # rootedit builds on this module
+
+    return attach_by_role(root, layer_path).sublayers
 
 
-def attach_weakest(root: Path, layer_path: Path) -> list[str]:
-    """Add layer_path as root's weakest sublayer (the base a capture is), once."""
-    return _insert_sublayer(root, layer_path, strongest=False)
-
-
-def _insert_sublayer(root: Path, layer_path: Path, strongest: bool) -> list[str]:
-    root = Path(root)
-    if not root.is_file():
-        raise TakeError(f"{root}: no such take root to attach to")
-    try:
-        existing = Sdf.Layer.OpenAsAnonymous(str(root))
-    except Tf.ErrorException:
-        existing = None
-    if existing is None:
-        raise TakeError(f"{root}: not a readable USD layer")
-    check_writable(root)
-    entry = relative_asset_path(layer_path, root.parent)
-    resolved = Path(layer_path).resolve()
-    paths = [p for p in existing.subLayerPaths if (root.parent / p).resolve() != resolved]
-    existing.subLayerPaths = [entry] + paths if strongest else paths + [entry]
-    export_atomically(existing, root)
-    return list(existing.subLayerPaths)
-
-
-def check_output_paths(output: Path, inputs: list[Path], attach: Path | None = None, root: Path | None = None,
-                       role: str | None = None) -> None:
-    """Refuse an output that is the take root it would be attached to."""
-    from facedyn.errors import UsageError
-
-    for target in (attach, root):
-        if target is not None and Path(target).resolve() == Path(output).resolve():
-            raise UsageError(f"{output}: the output is the take root it would be attached to; choose another -o")
-
-
-@dataclass
-class Placement:
-    sublayers: list[str]
-    stale: list[str]
-
-
-def write_and_attach(root: Path, layer_path: Path, role_name: str, write, timing: Timing, frames) -> Placement:
-    """Write the layer (through `write`) and place it in root's subLayers by role."""
-    write()
-    if not root.exists():
-        write_take_root(root, [layer_path], timing)
-        return Placement([relative_asset_path(layer_path, root.parent)], [])
-    sublayers = attach_weakest(root, layer_path) if role_name == "captured" else attach(root, layer_path)
-    return Placement(sublayers, [])
+attach_weakest = attach  # a captured layer is placed weakest by its role

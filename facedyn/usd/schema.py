@@ -6,10 +6,15 @@ properties once and read/write them as NumPy arrays.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from pxr import Sdf, Usd, Vt
+
+from facedyn.usd.runs import LayerInput, run_id
+from facedyn.usd.stage import relative_asset_path
 
 SKULL_API = "FacedynSkullAPI"
 FACE_API = "FacedynFaceAPI"
@@ -106,13 +111,48 @@ class SkullAttributes:
 
 @dataclass
 class Provenance:
-    """One processor run: recorded in customLayerData and as a FacedynProcessorAPI instance."""
+    """One processor run as its caller describes it (inputs as paths, labels or read LayerInputs).
+
+    `record` turns it into the `RunRecord` a layer stores: inputs relative to the layer and
+    identified by their runs, and the run's own deterministic id.
+    """
 
     processor: str
     version: str
     parameters: dict
     frame_range: tuple[float, float]
-    inputs: list[str]
+    inputs: list[str | os.PathLike | LayerInput]
+    role: str | None = None  # a performance.Role name; None: the writer decides (write_layer)
+
+    def record(self, anchor_dir: Path, role: str) -> "RunRecord":
+        """This run as stored in a layer written into anchor_dir, with role `role`."""
+        inputs = [LayerInput.of(i) for i in self.inputs]
+        parameters = json.dumps(self.parameters, sort_keys=True, default=str)
+        frame_range = (float(self.frame_range[0]), float(self.frame_range[-1]))
+        return RunRecord(
+            processor=self.processor,
+            role=role,
+            version=self.version,
+            parameters=parameters,
+            frame_range=frame_range,
+            inputs=tuple(relative_asset_path(i.path, anchor_dir) if os.path.isabs(i.path) else i.path for i in inputs),
+            input_runs=tuple(i.run for i in inputs),
+            run=run_id(self.processor, self.version, parameters, frame_range, [i.run for i in inputs]),
+        )
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One processor run as a layer records it: in customLayerData and as a FacedynProcessorAPI instance."""
+
+    processor: str
+    role: str
+    version: str
+    parameters: str  # JSON, keys sorted
+    frame_range: tuple[float, float]
+    inputs: tuple[str, ...]  # asset paths relative to the layer (or labels that name no file)
+    input_runs: tuple[str, ...]  # each input's run id ("" for a label)
+    run: str
 
     @property
     def instance_name(self) -> str:
@@ -122,10 +162,13 @@ class Provenance:
         """The run as layer metadata (customLayerData["facedyn"]); arrays as typed Vt arrays."""
         return {
             "processor": self.processor,
+            "role": self.role,
             "version": self.version,
-            "parameters": json.dumps(self.parameters, sort_keys=True, default=str),
-            "frameRange": Vt.DoubleArray([float(f) for f in self.frame_range]),
-            "inputs": Vt.StringArray([str(i) for i in self.inputs]),
+            "parameters": self.parameters,
+            "frameRange": Vt.DoubleArray(list(self.frame_range)),
+            "inputs": Vt.StringArray(list(self.inputs)),
+            "inputRuns": Vt.StringArray(list(self.input_runs)),
+            "run": self.run,
         }
 
     def write(self, prim: Usd.Prim) -> None:
@@ -133,10 +176,20 @@ class Provenance:
         prefix = f"facedyn:processor:{self.instance_name}:"
         types = Sdf.ValueTypeNames
         prim.CreateAttribute(prefix + "processor", types.Token).Set(self.processor)
+        prim.CreateAttribute(prefix + "role", types.Token).Set(self.role)
         prim.CreateAttribute(prefix + "version", types.String).Set(self.version)
-        prim.CreateAttribute(prefix + "parameters", types.String).Set(json.dumps(self.parameters, sort_keys=True, default=str))
-        prim.CreateAttribute(prefix + "frameRange", types.Double2).Set(tuple(float(f) for f in self.frame_range))
-        prim.CreateAttribute(prefix + "inputs", types.StringArray).Set([str(i) for i in self.inputs])
+        prim.CreateAttribute(prefix + "parameters", types.String).Set(self.parameters)
+        prim.CreateAttribute(prefix + "frameRange", types.Double2).Set(self.frame_range)
+        prim.CreateAttribute(prefix + "inputs", types.StringArray).Set(list(self.inputs))
+        prim.CreateAttribute(prefix + "inputRuns", types.StringArray).Set(list(self.input_runs))
+        prim.CreateAttribute(prefix + "run", types.String).Set(self.run)
+
+
+def recorded_inputs(data: dict) -> list[dict]:
+    """customLayerData["facedyn"]'s inputs as [{layer, run}] (run "" where an older layer kept none)."""
+    layers = [str(i) for i in data.get("inputs", [])]
+    runs = [str(r) for r in data.get("inputRuns", [])]
+    return [{"layer": layer, "run": runs[k] if k < len(runs) else ""} for k, layer in enumerate(layers)]
 
 
 def read_provenance(prim: Usd.Prim) -> list[dict]:
@@ -147,15 +200,22 @@ def read_provenance(prim: Usd.Prim) -> list[dict]:
             continue
         name = schema.split(":", 1)[1]
         prefix = f"facedyn:processor:{name}:"
-        params = prim.GetAttribute(prefix + "parameters").Get()
-        frame_range = prim.GetAttribute(prefix + "frameRange").Get()
+
+        def get(attr: str, prefix=prefix):
+            return prim.GetAttribute(prefix + attr).Get()
+
+        params = get("parameters")
+        frame_range = get("frameRange")
         runs.append(
             {
-                "processor": prim.GetAttribute(prefix + "processor").Get(),
-                "version": prim.GetAttribute(prefix + "version").Get(),
+                "processor": get("processor"),
+                "role": get("role"),
+                "version": get("version"),
                 "parameters": json.loads(params) if params else {},
                 "frameRange": list(frame_range) if frame_range is not None else None,
-                "inputs": list(prim.GetAttribute(prefix + "inputs").Get() or []),
+                "inputs": list(get("inputs") or []),
+                "inputRuns": list(get("inputRuns") or []),
+                "run": get("run"),
             }
         )
     return runs

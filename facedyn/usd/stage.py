@@ -1,4 +1,4 @@
-"""Opening USD files with errors a user can act on."""
+"""Opening USD files with errors a user can act on, and naming them in asset paths."""
 from __future__ import annotations
 
 import os
@@ -42,3 +42,15 @@ def get_prim(stage: Usd.Stage, prim_path: str) -> Usd.Prim:
 def layer_name(stage: Usd.Stage) -> str:
     return stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
 
+
+
+def relative_asset_path(target: str | os.PathLike, anchor_dir: str | os.PathLike) -> str:
+    """target as a path relative to anchor_dir, in USD's './x' form when possible."""
+    rel = os.path.relpath(Path(target).resolve(), Path(anchor_dir).resolve())
+    rel = rel.replace(os.sep, "/")
+    return rel if rel.startswith("../") else "./" + rel
+
+
+def resolve_asset_path(entry: str, anchor_dir: str | os.PathLike) -> Path:
+    """The real file an asset path written in a layer of anchor_dir names (symlinks resolved)."""
+    return (Path(anchor_dir) / entry).resolve()

@@ -14,9 +14,11 @@ from pathlib import Path
 import numpy as np
 from pxr import Usd, UsdGeom
 
-from facedyn.performance import UVs, Performance, Topology
+from facedyn.performance import UVs, Performance, Topology, roles
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
+from facedyn.usd.layerstack import LEGACY_PROCESSOR_ROLES, is_take_root, layer_metadata, role_of
+from facedyn.usd.runs import IN_MEMORY, LayerInput, current_run
 from facedyn.usd.stage import get_prim, layer_name, open_stage
 from facedyn.usd.timing import Timing
 
@@ -25,12 +27,13 @@ from facedyn.usd.timing import Timing
 class TakeSource:
     """Where a Performance came from: what result layers need to point back at it."""
 
-    path: Path
+    path: Path  # the take root (or single layer) that was opened
     stage: Usd.Stage
     mesh_path: str
     skull_path: str | None
     timing: Timing
     layer_identifiers: tuple[str, ...]
+    inputs: tuple[LayerInput, ...] = ()  # the data layers read, strongest first, with their run ids
 
 
 def read_take(
@@ -41,14 +44,46 @@ def read_take(
 ) -> tuple[Performance, TakeSource]:
     """Read the face of a take (the mesh with FacedynFaceAPI, or `mesh`) over `frames` (inclusive).
 
-    `mute` names processors whose layers are muted first, e.g. to read the quasistatic
-    performance under the synthesized variants stacked on it.
+    `mute` names processors whose layers are muted first (older callers; a processor reads
+    with `read_take_below` instead).
     """
     stage = open_stage(path)
     if mute:
-        from facedyn.usd.layerstack import result_layers
+        stage.MuteAndUnmuteLayers(
+            [layer.identifier for layer in stage.GetLayerStack(False) if (layer_metadata(layer) or {}).get("processor") in mute], []
+        )
+    return read_stage(stage, Path(path), mesh, frames)
 
-        stage.MuteAndUnmuteLayers(result_layers(stage, mute), [])
+
+def read_take_below(
+    path: str | os.PathLike, role_name: str, frames: tuple[float, float] | None = None, mesh: str | None = None
+) -> tuple[Performance, TakeSource]:
+    """Read the take as a processor writing `role_name` sees it: composed from the layers below that role.
+
+    Every layer of that role's rank or higher is muted, and so is any layer of unknown role
+    sitting above a muted one, so a re-run never reads its own earlier result or anything
+    built on it. Fails, naming what to run, when no layer of the role it reads (Role.reads)
+    lies below.
+    """
+    known = roles()
+    if role_name not in known:
+        raise TakeError(f"{path}: unknown role {role_name!r}; known: {', '.join(known)}")
+    wanted = known[role_name]
+    stage = open_stage(path)
+    stack = stage.GetLayerStack(includeSessionLayers=False)
+    muted, cut = [], False
+    for layer in reversed(stack[1:]):  # weakest first, so a layer above a muted one is known to be above the cut
+        role = role_of(layer_metadata(layer), known)
+        if (role is not None and role.rank >= wanted.rank) or (role is None and cut):
+            muted.append(layer.identifier)
+            cut = True
+    stage.MuteAndUnmuteLayers(muted, [])
+    if wanted.reads is not None:
+        below = {role.name for layer in stage.GetLayerStack(False) if (role := role_of(layer_metadata(layer), known))}
+        if wanted.reads not in below:
+            writer = next((p for p, r in LEGACY_PROCESSOR_ROLES.items() if r == wanted.reads), None)
+            hint = f"; run `usdfacedyn {writer}` first" if writer else ""
+            raise TakeError(f"{path}: a {role_name} layer is computed from a {wanted.reads} layer, and none lies below it{hint}")
     return read_stage(stage, Path(path), mesh, frames)
 
 
@@ -70,11 +105,20 @@ def read_stage(
         mesh_path=str(mesh_prim.GetPath()),
         skull_path=str(skull_prim.GetPath()) if skull_prim else None,
         timing=Timing.from_stage(stage),
-        layer_identifiers=tuple(
-            layer.identifier for layer in stage.GetLayerStack(includeSessionLayers=False) if not stage.IsLayerMuted(layer.identifier)
-        ),
+        layer_identifiers=tuple(layer.identifier for layer in stage.GetLayerStack(includeSessionLayers=False)),
+        inputs=read_inputs(stage),
     )
     return performance, source
+
+
+def read_inputs(stage: Usd.Stage) -> tuple[LayerInput, ...]:
+    """The data layers of the stage's (unmuted) layer stack with their run ids; roots that only list others are left out."""
+    inputs = []
+    for layer in stage.GetLayerStack(includeSessionLayers=False):
+        if is_take_root(layer):
+            continue
+        inputs.append(LayerInput(layer.realPath, current_run(layer.realPath)) if layer.realPath else LayerInput(IN_MEMORY, ""))
+    return tuple(inputs)
 
 
 def find_face_mesh(stage: Usd.Stage) -> Usd.Prim:
@@ -234,24 +278,6 @@ def ensure_finite(values: np.ndarray, time_codes: np.ndarray, where: str) -> Non
         bad = int(np.argmin(finite))
         raise TakeError(f"{where}: NaN or infinite values at time {time_codes[bad]:g}")
 
-
-
-_ROLE_OF_PROCESSOR = {"import": "captured", "stabilize": "stabilized", "remove": "quasistatic", "synthesize": "synthesized",
-                      "retarget": "retargeted", "preview": "preview"}
-
-
-def read_take_below(path: str | os.PathLike, role_name: str, frames: tuple[float, float] | None = None,
-                    mesh: str | None = None) -> tuple[Performance, TakeSource]:
-    """The take composed from the layers below `role_name`'s rank (what a processor writing it reads)."""
-    from facedyn.performance import role
-    from facedyn.usd.layerstack import layer_role, processor_of
-
-    rank = role(role_name).rank
-    stage = open_stage(path)
-    above = [layer.identifier for layer in stage.GetUsedLayers(includeClipLayers=False)
-             if (name := _ROLE_OF_PROCESSOR.get(processor_of(layer) or "") or layer_role(layer)) and role(name).rank >= rank]
-    stage.MuteAndUnmuteLayers(above, [])
-    return read_stage(stage, Path(path), mesh, frames)
 
 
 def read_layers(layers: list[Path]) -> Performance:

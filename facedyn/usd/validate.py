@@ -2,19 +2,25 @@
 
 facedyn's checks are the promises its layers make (DESIGN.md): offsets have one vector per
 point, every frame's extent bounds its points, every layer of the stack agrees on timing,
-and every frame a layer covers is authored.
+and every frame a layer covers is authored; and the promises of a take root's stack: its
+layers sit in role order, each once, each covers the take's frames and has the layer it is
+computed from below it, and none is stale (computed from something no longer below it).
 """
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from pxr import Usd, UsdGeom, UsdValidation
 
+from facedyn.performance import roles
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
-from facedyn.usd.stage import open_stage
+from facedyn.usd.layerstack import is_take_root
+from facedyn.usd.stackstatus import open_root, stack_status
+from facedyn.usd.stage import open_stage, resolve_asset_path
 from facedyn.usd.take import find_face_mesh
 
 # Validators about packaging that do not apply to plain layer files.
@@ -31,6 +37,8 @@ class Finding:
 def validate_take(path: str | os.PathLike) -> list[Finding]:
     stage = open_stage(path)
     findings = usd_findings(stage)
+    if is_take_root(stage.GetRootLayer()):
+        findings += stack_findings(Path(path))
     try:
         face = find_face_mesh(stage)
     except TakeError as exc:
@@ -50,6 +58,39 @@ def usd_findings(stage: Usd.Stage) -> list[Finding]:
             continue
         severity = "error" if error.GetType() == UsdValidation.ValidationErrorType.Error else "warning"
         findings.append(Finding(severity, f"usd:{error.GetName()}", error.GetMessage()))
+    return findings
+
+
+def stack_findings(root: Path) -> list[Finding]:
+    """The root's layers: listed once, present, in role order, covering the take, fed by what they read, fresh."""
+    findings = []
+    seen = {}
+    root_layer = open_root(root)
+    for asset in root_layer.subLayerPaths:
+        path = resolve_asset_path(asset, root.parent)
+        if path == root.resolve():
+            findings.append(Finding("error", "facedyn:LayerStack", f"{root}: lists itself ({asset}) among its subLayers"))
+        elif path in seen:
+            findings.append(Finding("error", "facedyn:LayerStack", f"{root}: lists {asset} twice (also as {seen[path]})"))
+        seen.setdefault(path, asset)
+    known = roles()
+    listed = [s for s in stack_status(root) if not s.muted]
+    ranked = [s for s in listed if s.rank is not None]
+    for upper, lower in zip(ranked, ranked[1:]):
+        if upper.rank < lower.rank:
+            findings.append(Finding("error", "facedyn:LayerOrder", f"{root}: {upper.asset} ({upper.role}) sits above {lower.asset} ({lower.role}), "
+                                    f"whose role ranks higher; it would hide it (usdfacedyn layers can put them back in order)"))
+    for i, s in enumerate(listed):
+        if not s.exists:
+            findings.append(Finding("error", "facedyn:LayerStack", f"{root}: lists {s.asset}, which does not exist"))
+        if not s.covers:
+            findings.append(Finding("error", "facedyn:FrameCoverage", f"{s.asset}: covers frames {s.frames[0]:g}..{s.frames[1]:g}, the take "
+                                    f"{s.take_frames[0]:g}..{s.take_frames[1]:g}; the frames it lacks hold its nearest value"))
+        needs = known[s.role].reads if s.role in known else None
+        if needs and not any(below.role == needs for below in listed[i + 1 :]):
+            findings.append(Finding("error", "facedyn:LayerRequires", f"{s.asset}: a {s.role} layer needs a {needs} layer below it, and none is"))
+        if s.stale:
+            findings.append(Finding("warning", "facedyn:Stale", f"{s.asset}: stale, {s.reason}"))
     return findings
 
 

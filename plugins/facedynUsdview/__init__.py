@@ -1,4 +1,7 @@
-"""usdview plugin: a "facedyn" menu to mute/unmute result layers and toggle the heat map.
+"""usdview plugin: a "facedyn" menu to mute/unmute result layers, one entry per layer role.
+
+The entries come from facedyn's role table (facedyn.performance.roles()), so a third
+party's role gets its own entry, and muting goes by the role each layer records.
 
 usdview finds it through PXR_PLUGINPATH_NAME and imports it from PYTHONPATH (both printed
 by `usdfacedyn env`). The pip usd-core has no usdview, so without pxr.Usdviewq this module
@@ -12,20 +15,24 @@ try:
 except ImportError:  # no usdview in this USD build
     PluginContainer = None
 
-# (command id, menu label, processors whose layers the command toggles)
-COMMANDS = (
-    ("toggleStabilized", "Toggle stabilized layers", frozenset({"stabilize"})),
-    ("toggleQuasistatic", "Toggle quasistatic layers", frozenset({"remove"})),
-    ("toggleSynthesized", "Toggle synthesized/retargeted layers", frozenset({"synthesize", "retarget"})),
-    ("toggleHeatMap", "Toggle heat map", frozenset({"preview"})),
-)
+from facedyn.performance import roles
 
 
-def _toggler(processors):
+def menu_commands() -> tuple[tuple[str, str, frozenset[str]], ...]:
+    """(command id, menu label, roles it toggles) for every role above the base (the capture)."""
+    known = list(roles().values())
+    base = min(role.rank for role in known)
+    return tuple((f"toggle_{r.name}", f"Toggle {r.label}", frozenset({r.name})) for r in known if r.rank > base)
+
+
+COMMANDS = menu_commands()
+
+
+def _toggler(role_names):
     def command(usdviewApi):
         from facedyn.usd.layerstack import toggle
 
-        toggle(usdviewApi.stage, processors)
+        toggle(usdviewApi.stage, role_names)
 
     return command
 
@@ -41,8 +48,8 @@ if PluginContainer is not None:
     class FacedynPluginContainer(PluginContainer):
         def registerPlugins(self, plugRegistry, usdviewApi):
             self._commands = [
-                plugRegistry.registerCommandPlugin(f"FacedynPluginContainer.{name}", label, _toggler(processors))
-                for name, label, processors in COMMANDS
+                plugRegistry.registerCommandPlugin(f"FacedynPluginContainer.{name}", label, _toggler(role_names))
+                for name, label, role_names in COMMANDS
             ]
             self._commands.append(
                 plugRegistry.registerCommandPlugin("FacedynPluginContainer.unmuteAll", "Show all facedyn layers", _unmute_all)

@@ -97,13 +97,13 @@ def test_processor_input_errors(corpus, capsys):
     folder, models = corpus
     take = folder / "neutral_walk"
     assert cli("remove", take / "take.usda", "--model", models / "f.removal", "-o", take / "q.usdc") == 1
-    assert "not stabilized" in capsys.readouterr().err
+    assert "run `usdfacedyn stabilize` first" in capsys.readouterr().err
     assert cli("remove", take / "truth.usda", "-o", take / "q.usdc") == 2
     assert "--model" in capsys.readouterr().err
     assert cli("remove", take / "truth.usda", "--model", models / "h.synthesis", "-o", take / "q.usdc") == 2
     assert "synthesis model" in capsys.readouterr().err
     assert cli("synthesize", take / "take.usda", "--model", models / "h.synthesis", "-o", take / "s.usdc") == 1
-    assert "not quasistatic" in capsys.readouterr().err
+    assert "run `usdfacedyn remove` first" in capsys.readouterr().err
     assert cli("synthesize", take / "truth.usda", "--model", models / "h.synthesis", "--skull-motion", "moonwalk", "-o", take / "s.usdc") == 2
     assert "moonwalk" in capsys.readouterr().err
     (take / "junk.removal").write_bytes(b"\x80\x04 not a model")

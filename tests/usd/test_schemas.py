@@ -30,6 +30,16 @@ def test_schema_registry_knows_all_three_schemas():
     assert offsets.GetInfo("interpolation") == "vertex"
 
 
+def test_role_tokens_come_from_the_role_table():
+    from facedyn.performance import BUILTIN_ROLES
+
+    registry = Usd.SchemaRegistry()
+    face = registry.FindAppliedAPIPrimDefinition("FacedynFaceAPI").GetSchemaAttributeSpec("facedyn:face:role")
+    assert list(face.GetInfo("allowedTokens")) == [r.name for r in BUILTIN_ROLES if r.face_role]
+    processor = registry.FindAppliedAPIPrimDefinition("FacedynProcessorAPI")
+    assert {f"facedyn:processor:__INSTANCE_NAME__:{name}" for name in ("role", "run", "inputRuns")} <= set(processor.GetPropertyNames())
+
+
 def test_applied_schemas_give_typed_properties():
     stage = Usd.Stage.CreateInMemory()
     skull = UsdGeom.Xform.Define(stage, "/P/Skull").GetPrim()

@@ -85,7 +85,8 @@ def test_result_layer_composes_over_capture_and_reproduces_world_points(tmp_path
     composed = Usd.Stage.Open(str(root))
     face = composed.GetPrimAtPath("/Performance/Skull/Face")
     runs = {run["processor"]: run for run in schema.read_provenance(face)}
-    assert set(runs) == {"import", "stabilize"} and runs["stabilize"]["inputs"] == [str(capture)]
+    assert set(runs) == {"import", "stabilize"} and runs["stabilize"]["inputs"] == ["./capture.usdc"]
+    assert runs["stabilize"]["role"] == "stabilized" and runs["stabilize"]["inputRuns"] == [dict(Sdf.Layer.OpenAsAnonymous(str(capture)).customLayerData)["facedyn"]["run"]]
     # Every covered frame is authored; offsets carry their interpolation.
     assert list(layer.GetAttributeAtPath("/Performance/Skull/Face.points").GetInfo("timeSamples").keys()) == list(FRAMES)
     assert face.GetAttribute(schema.OFFSETS_ATTR).GetMetadata("interpolation") == "vertex"

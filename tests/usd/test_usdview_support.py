@@ -21,7 +21,9 @@ def test_usdview_plugin_is_registered_and_import_guarded():
         module = importlib.import_module("facedynUsdview")
     finally:
         sys.path.pop(0)
-    assert {c[0] for c in module.COMMANDS} >= {"toggleHeatMap", "toggleQuasistatic"}
+    # One entry per role above the capture, straight from the role table.
+    assert [c[2] for c in module.COMMANDS] == [frozenset({r}) for r in ("stabilized", "quasistatic", "synthesized", "retargeted", "preview")]
+    assert ("toggle_preview", "Toggle heat map", frozenset({"preview"})) in module.COMMANDS
     has_usdview = importlib.util.find_spec("pxr.Usdviewq") is not None
     assert hasattr(module, "FacedynPluginContainer") == has_usdview
 
@@ -51,7 +53,7 @@ def test_toggles_mute_results_and_show_the_layer_below(tmp_path):
     assert layerstack.toggle(stage, {"preview"}) is False
     assert face.GetAttribute("primvars:displayColor").HasAuthoredValue()
     # Muting the truth quasistatic layer shows the captured skin in skull space below it.
-    layerstack.toggle(stage, {"simulate-truth-quasistatic"})
+    layerstack.toggle(stage, {"quasistatic"})
     np.testing.assert_allclose(np.asarray(face.GetAttribute("points").Get(5)), take.captured[4], atol=1e-5)
     layerstack.unmute_all(stage)
     np.testing.assert_allclose(np.asarray(face.GetAttribute("points").Get(5)), take.quasistatic[4], atol=1e-5)
