@@ -1,7 +1,7 @@
 """Running a batch's steps on a Dask cluster: one task per (take, step), chained per take.
 
 `open_client` starts an embedded LocalCluster (worker processes of one thread each, one per
-core unless told) or connects to an existing scheduler (`dask scheduler` / `dask worker
+core unless told, their numeric libraries and OpenCL single-threaded too) or connects to an existing scheduler (`dask scheduler` / `dask worker
 --nthreads 1`, or a dask-jobqueue cluster on Slurm/PBS/SGE: pass its scheduler address).
 Steps of one take run in order, takes run side by side. A task whose worker dies is
 rescheduled by Dask on another worker (up to the scheduler's allowed-failures), and every
@@ -18,7 +18,10 @@ from typing import Callable, Iterator
 from facedyn.batch.plan import StepPlan
 from facedyn.batch.steps import DONE, execute_step
 
-RETRIES = 2  # resubmissions of a task that raised (a step itself never raises; see steps.execute_step)
+RETRIES = 2
+# One thread per local worker process (one process per core): torch and BLAS (OMP), PoCL's
+# OpenCL CPU device (old and new names); a value already in the environment wins.
+SINGLE_THREADED = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "POCL_MAX_PTHREAD_COUNT", "POCL_CPU_MAX_CU_NUM")  # resubmissions of a task that raised (a step itself never raises; see steps.execute_step)
 
 ResultCallback = Callable[[dict, list[dict]], None]  # (the step's result, every result so far)
 
@@ -34,7 +37,9 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
             yield client
         return
     count = workers or os.cpu_count() or 1
-    with LocalCluster(n_workers=count, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, Client(cluster) as client:
+    env = {name: os.environ.get(name, "1") for name in SINGLE_THREADED}
+    with LocalCluster(n_workers=count, threads_per_worker=1, processes=True, dashboard_address=":0", env=env) as cluster, \
+            Client(cluster) as client:
         yield client
 
 
