@@ -18,14 +18,6 @@ from facedyn.dynamics.training import PairSet, Take, TrainConfig, train_removal
 FPS = 120.0
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 @pytest.fixture(scope="module")
 def corpus():
     pts, topo = curved_sheet(12, 10)
