@@ -7,6 +7,7 @@
     usdfacedyn inspect TAKE|MODEL         layer stack, timing, roles, staleness, provenance
     usdfacedyn validate TAKE              USD's validators plus facedyn's own
     usdfacedyn layers TAKE                list, mute, unmute, detach or reorder a take's layers
+    usdfacedyn batch CAPTURES... -o DIR   import ... preview over many captures on Dask
     usdfacedyn env                        the PXR_PLUGINPATH_NAME line for usdview / DCCs
 
 Every processor's flags are generated from its declaration (facedyn.processors.base).
@@ -215,6 +216,13 @@ def _add_tools(commands) -> None:
     p.add_argument("path", type=Path, metavar="TAKE|LAYER|MODEL")
     _common(p, "print JSON")
     p.set_defaults(handler=_cmd_inspect)
+
+    p = commands.add_parser("batch", help="run a pipeline of steps over many captures on a Dask cluster (local by default)")
+    from facedyn.batch.command import add_batch_arguments, run_batch
+
+    add_batch_arguments(p)
+    p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
+    p.set_defaults(handler=run_batch)
 
     p = commands.add_parser("validate", help="run USD's validators and facedyn's own on a take")
     p.add_argument("take", type=Path, metavar="TAKE")

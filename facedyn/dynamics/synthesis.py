@@ -23,7 +23,8 @@ new skull motion, S(t) of the quasistatic shape, H, then the Laplacian propagati
 from __future__ import annotations
 
 from dataclasses import asdict
-from typing import Mapping, Sequence
+from pathlib import Path
+from typing import Iterable, Iterator, Mapping
 
 import numpy as np
 import torch
@@ -31,13 +32,14 @@ import torch
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.features import check_fps
 from facedyn.dynamics.modelfile import DynamicsModel
-from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec, resolve_device
+from facedyn.dynamics.network import SYNTHESIS_HIDDEN, NetworkSpec, resolve_device
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
 from facedyn.dynamics.targets import moving_average
-from facedyn.dynamics.training import ProgressCallback, Take, TrainConfig, fit_new_network, split_takes
+from facedyn.dynamics.training import (ProgressCallback, Resident, Take, TrainConfig, fit_new_network, offset_errors, split_store,
+                                       store_takes, streamed_normalization)
 from facedyn.performance import UVs
 
 EPOCHS = 30
@@ -55,8 +57,8 @@ def synthesis_config(**changes) -> TrainConfig:
     return TrainConfig(**{"epochs": EPOCHS, "batch_size": BATCH_FRAMES, "skull_motion": SkullMotionInput(), **changes})
 
 
-class FrameSet:
-    """Synthesis examples, one per frame: input [skull features, S(t)], target dY(t) of all samples."""
+class FrameSet(Resident):
+    """Synthesis examples in memory, one per frame: input [skull features, S(t)], target dY(t) of all samples."""
 
     def __init__(self, inputs: np.ndarray, targets: np.ndarray, device: torch.device):
         self.inputs = torch.from_numpy(inputs).to(device)
@@ -70,15 +72,17 @@ class FrameSet:
 
 
 def train_synthesis(
-    takes: Sequence,
+    takes: Iterable,
     face: FaceSetup,
     neighbourhoods: UVNeighbourhoods | UVs,
     quasistatic: DynamicsModel | Mapping[str, np.ndarray],
     config: TrainConfig | None = None,
     progress: ProgressCallback | None = None,
     backend: str = "auto",
+    *,
+    scratch: Path | str | None = None,
 ) -> DynamicsModel:
-    """Train network H on the takes (Take objects or dicts) for the given face setup.
+    """Train network H on the takes (Take objects or dicts, any iterable) for the given face setup.
 
     neighbourhoods: the stretch neighbourhoods of ``face.samples`` on ``face.rest_points``,
     or the mesh's uvs to build them from (2 mm differences). quasistatic: where y(t) comes
@@ -88,26 +92,31 @@ def train_synthesis(
     a take's ends are left out, the validation takes are held out whole. ``backend``
     picks the stretch (and removal) kernels (facedyn.kernels.runtime.choose_backend).
     ``config.skull_motion`` is what H reads of the skull (synthesis_config's default:
-    accelerations; None: the paper's B(t) over ``config.window``).
+    accelerations; None: the paper's B(t) over ``config.window``). The examples go to a
+    store in ``scratch`` (facedyn.dynamics.training.train_removal says how).
     """
     config = config or synthesis_config()
     skull_motion = config.skull_motion or SkullMotionInput("velocity", config.window, config.window)
-    takes, fps, held = split_takes(takes, config.validation)
-    source = _source_description(quasistatic, takes, face, fps)
+    source = _source_description(quasistatic)
     nb = _neighbourhoods(neighbourhoods, face)
     lengths = difference_lengths(face.rest_points.astype(np.float32), nb).astype(np.float32)
-    prepared = {t.name: _prepare(t, face, nb, lengths, quasistatic, config, backend, skull_motion) for t in takes}
     device = resolve_device(config.device)
-    train = _frames([prepared[t.name] for t in takes if t.name not in held], device)
-    val = _frames([prepared[t.name] for t in takes if t.name in held], device)
-
-    spec = NetworkSpec(train.inputs.shape[1], SYNTHESIS_HIDDEN, train.targets.shape[1])
-    network, curve = fit_new_network(spec, _normalization(train), train, val, config, device, progress)
-    errors = _validation_errors(network, val) if val is not None else None
+    store, described, fps = store_takes(takes, lambda take: _prepare(take, face, nb, lengths, quasistatic, config, backend, skull_motion), scratch)
+    with store:
+        if isinstance(quasistatic, Mapping):
+            extra = sorted(set(quasistatic) - {d["name"] for d in described})
+            if extra:
+                raise ValueError(f"quasistatic shapes must be given for exactly the takes: not a take {extra}")
+        train, val = split_store(store, described, config, 1, lambda a: FrameSet(a["inputs"], a["targets"], device))
+        names = [d["name"] for d in described if not d["validation"]]
+        spec = NetworkSpec(store.columns["inputs"][0], SYNTHESIS_HIDDEN, store.columns["targets"][0])
+        normalization = streamed_normalization(store, names, ("inputs",), "targets")
+        network, curve = fit_new_network(spec, normalization, train, val, config, device, progress)
+        errors = offset_errors(network, val, config.batch_size, "frames") if val is not None else None
     network.cpu()
     info = {
         "training": {
-            "takes": [{"name": t.name, "frames": int(len(t.points)), "space": t.space, "validation": t.name in held} for t in takes],
+            "takes": described,
             "train_frames": len(train),
             "quasistatic_source": source,
             "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()},
@@ -237,25 +246,20 @@ def _neighbourhoods(value, face: FaceSetup) -> UVNeighbourhoods:
     return value
 
 
-def _source_description(quasistatic, takes: list[Take], face: FaceSetup, fps: float) -> dict:
-    """Check the quasistatic source against the takes; describe it for the model's info."""
+def _source_description(quasistatic) -> dict:
+    """Check the kind of quasistatic source (each take is checked against it as it comes); describe it for the model's info."""
     if isinstance(quasistatic, DynamicsModel):
         if quasistatic.kind != "removal":
             raise ValueError(f"quasistatic shapes come from a removal model, got a {quasistatic.kind!r} model")
-        quasistatic.check_compatible(face.topology, fps)
         return {"kind": "removal", "topology_fingerprint": quasistatic.fingerprint, "validation": quasistatic.info.get("validation")}
     if not isinstance(quasistatic, Mapping):
         raise ValueError(f"quasistatic must be a removal model or a mapping of take names to shapes, got {type(quasistatic).__name__}")
-    names = {t.name for t in takes}
-    missing, extra = sorted(names - set(quasistatic)), sorted(set(quasistatic) - names)
-    if missing or extra:
-        raise ValueError(f"quasistatic shapes must be given for exactly the takes: missing {missing}, not a take {extra}")
     return {"kind": "given"}
 
 
 def _prepare(take: Take, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndarray, quasistatic, config: TrainConfig, backend: str,
-             skull_motion: SkullMotionInput):
-    """(inputs (F', skull features + 2S), targets (F', 3S)) of a take's frames away from its ends."""
+             skull_motion: SkullMotionInput) -> Iterator[dict[str, np.ndarray]]:
+    """A take's frames away from its ends as store rows: inputs (skull features + 2S), targets (3S)."""
     pts = check_points(take.points, f"take {take.name!r} points")
     f = len(pts)
     if pts.shape[1] != face.point_count:
@@ -264,9 +268,12 @@ def _prepare(take: Take, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndar
         raise ValueError(f"take {take.name!r} has {f} frames, too few to leave out {config.trim} at each end")
     t, q = check_transforms(take.translate, take.orient, f)
     if isinstance(quasistatic, DynamicsModel):
+        quasistatic.check_compatible(face.topology, take.fps)
         y, offsets = remove_dynamics(pts, t, q, take.fps, quasistatic, backend, space=take.space)
         targets = offsets[:, face.samples]
     else:
+        if take.name not in quasistatic:
+            raise ValueError(f"quasistatic shapes must be given for exactly the takes: missing {[take.name]}")
         y = np.asarray(quasistatic[take.name], dtype=np.float32)
         if y.shape != pts.shape:
             raise ValueError(f"take {take.name!r}: quasistatic shapes are {y.shape}, its points {pts.shape}")
@@ -274,35 +281,5 @@ def _prepare(take: Take, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndar
     s = stretch_features(expression_shape(y, config.target_window), nb, lengths, backend)
     b = skull_motion.features(t, q, face.landmarks, take.fps)
     keep = slice(config.trim, f - config.trim)
-    inputs = np.concatenate([b, s.reshape(f, -1)], axis=1)[keep]
-    return np.ascontiguousarray(inputs, np.float32), np.ascontiguousarray(targets.reshape(f, -1)[keep], np.float32)
-
-
-def _frames(prepared: list, device: torch.device) -> FrameSet | None:
-    if not prepared:
-        return None
-    return FrameSet(np.concatenate([p[0] for p in prepared]), np.concatenate([p[1] for p in prepared]), device)
-
-
-def _normalization(train: FrameSet) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    inputs = train.inputs.cpu().numpy().astype(np.float64)
-    targets = train.targets.cpu().numpy().astype(np.float64)
-    out_mean = targets.mean(axis=0)
-    return inputs.mean(axis=0), inputs.std(axis=0), out_mean, float(np.sqrt(np.mean((targets - out_mean) ** 2)))
-
-
-@torch.no_grad()
-def _validation_errors(network: Network, examples: FrameSet) -> dict:
-    """Per-sample offset errors over the validation frames, in cm, beside zero offsets."""
-    network.eval()
-    predicted = network(examples.inputs).view(len(examples), -1, 3)
-    truth = examples.targets.view(len(examples), -1, 3)
-    dist = torch.linalg.norm(predicted - truth, dim=2).double()
-    size = torch.linalg.norm(truth, dim=2).double()
-    return {
-        "frames": len(examples),
-        "rms_cm": float(torch.sqrt(torch.mean(dist**2))),
-        "mean_cm": float(torch.mean(dist)),
-        "max_cm": float(torch.max(dist)),
-        "zero_offset_rms_cm": float(torch.sqrt(torch.mean(size**2))),
-    }
+    yield {"inputs": np.concatenate([b[keep], s[keep].reshape(f - 2 * config.trim, -1)], axis=1),
+           "targets": targets[keep].reshape(f - 2 * config.trim, -1)}

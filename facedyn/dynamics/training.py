@@ -12,14 +12,17 @@ most of the slow, quasi-static response to walking and head turns, which the tru
 dynamics hold in full. Validation holds out whole takes, never frames of a training
 take, because neighbouring frames of one take share most of their windows.
 
-`fit` is the loop itself, written against any example set with ``len`` and
-``gather(indices) -> (inputs, targets)``, so the synthesis network H (one example per
-frame) trains through it as well.
+Takes are prepared one at a time into an on-disk store (facedyn.dynamics.store) and
+training streams its examples back in chunks of bounded size, so the memory training
+needs does not grow with the corpus. `fit` is the loop itself, written against example
+sets with ``chunks`` of resident sets that have ``len`` and ``gather(indices) -> (inputs,
+targets)``, so the synthesis network H (one example per frame) trains through it as well.
 """
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Callable, Sequence
+from pathlib import Path
+from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 import torch
@@ -30,10 +33,12 @@ from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import Network, NetworkSpec, removal_spec, resolve_device
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
+from facedyn.dynamics.store import StreamedExamples, TrainingStore
 from facedyn.dynamics.targets import TARGET_WINDOW, dynamic_offsets
 from facedyn.performance import Performance
 
 TARGETS = ("moving-average", "truth")
+PREPARE_FRAMES = 1024  # frames of one take whose features are computed (and held) at once
 ProgressCallback = Callable[[int, float, "float | None"], None]  # (epoch, train loss, val loss) in cm^2
 
 
@@ -82,12 +87,13 @@ class TrainConfig:
     device: str = "auto"  # "auto" = cuda when available, else cpu
     target: str = "moving-average"  # F's targets: "moving-average" (the paper) or "truth" (Take.dynamics)
     skull_motion: SkullMotionInput | None = None  # skull features; None = the paper's B(t) over `window`
+    resident_bytes: int = 1 << 30  # examples held in memory at once; a larger corpus streams from its store in chunks
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS:
             raise ValueError(f"target must be one of {TARGETS}, got {self.target!r}")
-        if self.epochs < 1 or self.batch_size < 1 or self.max_validation_pairs < 1:
-            raise ValueError("epochs, batch_size and max_validation_pairs must be at least 1")
+        if self.epochs < 1 or self.batch_size < 1 or self.max_validation_pairs < 1 or self.resident_bytes < 1:
+            raise ValueError("epochs, batch_size, max_validation_pairs and resident_bytes must be at least 1")
         if not 0 < self.subsample <= 1:
             raise ValueError(f"subsample must be a fraction in (0, 1], got {self.subsample}")
         if not self.learning_rate > 0:
@@ -96,21 +102,30 @@ class TrainConfig:
             raise ValueError(f"trim must be a non-negative number of frames, got {self.trim}")
 
 
-class PairSet:
-    """Removal examples: (frame, sample) pairs with input [B(t), X_i(t)] and target dx_i(t)."""
+class Resident:
+    """An example set held in memory: one chunk, evaluated whole (see StreamedExamples)."""
 
-    def __init__(self, skull: np.ndarray, skin: np.ndarray, targets: np.ndarray, frames: np.ndarray, device: torch.device):
+    def chunks(self, generator: torch.Generator | None = None):
+        yield self
+
+    def subset(self, max_examples: int, generator: torch.Generator):
+        return self
+
+
+class PairSet(Resident):
+    """Removal examples in memory: every (frame, sample) pair, input [B(t), X_i(t)], target dx_i(t)."""
+
+    def __init__(self, skull: np.ndarray, skin: np.ndarray, targets: np.ndarray, device: torch.device):
         self.samples = skin.shape[1]
         self.skull = torch.from_numpy(skull).to(device)
         self.skin = torch.from_numpy(skin).to(device)
         self.targets = torch.from_numpy(targets).to(device)
-        self.frames = torch.from_numpy(frames.astype(np.int64)).to(device)
 
     def __len__(self) -> int:
-        return len(self.frames) * self.samples
+        return len(self.skull) * self.samples
 
     def gather(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        f = self.frames[idx // self.samples]
+        f = idx // self.samples
         s = idx % self.samples
         return torch.cat([self.skull[f], self.skin[f, s]], dim=1), self.targets[f, s]
 
@@ -118,31 +133,35 @@ class PairSet:
 def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCallback | None = None) -> list[dict]:
     """Adam on the L2 loss in normalized units; returns the loss curve in cm^2 per coordinate.
 
-    The network must already carry its normalization (the loss is reported as the mean
-    squared offset error, i.e. the normalized loss times output_scale^2).
+    train and val are example sets with ``chunks`` and ``subset``: resident ones
+    (PairSet, synthesis.FrameSet) or StreamedExamples from a TrainingStore. Each epoch
+    shuffles within every chunk (a resident set: all of it, as one permutation). The
+    network must already carry its normalization (the loss is reported as the mean squared
+    offset error, i.e. the normalized loss times output_scale^2).
     """
     device = next(network.parameters()).device
     generator = torch.Generator().manual_seed(config.seed)
     optimizer = torch.optim.Adam(network.parameters(), lr=config.learning_rate, foreach=True)
     scale2 = float(network.output_scale) ** 2
-    val_idx = None
-    if val is not None and len(val):
-        val_idx = torch.randperm(len(val), generator=generator)[: config.max_validation_pairs].to(device)
+    checked = None if val is None or not len(val) else val.subset(config.max_validation_pairs, generator)
     curve = []
     for epoch in range(1, config.epochs + 1):
         network.train()
-        count = max(1, int(round(config.subsample * len(train))))
-        order = torch.randperm(len(train), generator=generator)[:count].to(device)
-        total = 0.0
-        for start in range(0, count, config.batch_size):
-            x, y = train.gather(order[start: start + config.batch_size])
-            loss = torch.mean((network.normalized(x) - network.normalize_targets(y)) ** 2)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            total += float(loss.detach()) * len(x)
-        train_loss = total / count * scale2
-        val_loss = None if val_idx is None else mean_squared_error(network, val, val_idx, config.batch_size)
+        total, drawn = 0.0, 0
+        for chunk in train.chunks(generator):
+            count = max(1, int(round(config.subsample * len(chunk))))
+            order = torch.randperm(len(chunk), generator=generator)[:count].to(device)
+            for start in range(0, count, config.batch_size):
+                x, y = chunk.gather(order[start: start + config.batch_size])
+                loss = torch.mean((network.normalized(x) - network.normalize_targets(y)) ** 2)
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                optimizer.step()
+                total += float(loss.detach()) * len(x)
+            drawn += count
+            del chunk, order, x, y  # the next chunk loads into this one's memory
+        train_loss = total / drawn * scale2
+        val_loss = None if checked is None else mean_squared_error(network, checked, config.batch_size)
         curve.append({"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss})
         if progress is not None:
             progress(epoch, train_loss, val_loss)
@@ -162,37 +181,44 @@ def fit_new_network(spec: NetworkSpec, normalization, train, val, config: TrainC
 
 
 @torch.no_grad()
-def mean_squared_error(network: Network, examples, idx: torch.Tensor, batch_size: int) -> float:
-    """Mean squared offset error per coordinate (cm^2) over the examples ``idx``."""
+def mean_squared_error(network: Network, examples, batch_size: int) -> float:
+    """Mean squared offset error per coordinate (cm^2) over a resident example set."""
     network.eval()
     total = 0.0
-    for start in range(0, len(idx), batch_size):
-        x, y = examples.gather(idx[start: start + batch_size])
+    for start in range(0, len(examples), batch_size):
+        x, y = examples.gather(torch.arange(start, min(start + batch_size, len(examples)), device=network.output_scale.device))
         total += float(torch.sum((network(x) - y) ** 2)) / y.shape[1]
-    return total / len(idx)
+    return total / len(examples)
 
 
 @torch.no_grad()
-def validation_errors(network: Network, examples: PairSet, batch_size: int) -> dict:
-    """Offset errors over every validation pair, in cm, beside doing nothing (zero offsets)."""
+def offset_errors(network: Network, examples, batch_size: int, unit: str) -> dict:
+    """Errors of the predicted offsets (3-vectors) over every example, in cm, beside doing
+    nothing (zero offsets); ``unit`` names the example count ("pairs", "frames")."""
     network.eval()
-    dist, truth = [], []
-    idx = torch.arange(len(examples), device=examples.frames.device)
-    for start in range(0, len(idx), batch_size):
-        x, y = examples.gather(idx[start: start + batch_size])
-        dist.append(torch.linalg.norm(network(x) - y, dim=1).cpu())
-        truth.append(torch.linalg.norm(y, dim=1).cpu())
-    dist, truth = torch.cat(dist).double(), torch.cat(truth).double()
+    squared = total = truth_squared = 0.0
+    largest, vectors = 0.0, 0
+    device = network.output_scale.device
+    for chunk in examples.chunks():
+        for start in range(0, len(chunk), batch_size):
+            x, y = chunk.gather(torch.arange(start, min(start + batch_size, len(chunk)), device=device))
+            dist = torch.linalg.norm((network(x) - y).reshape(-1, 3), dim=1).double()
+            squared += float(torch.sum(dist**2))
+            total += float(torch.sum(dist))
+            largest = max(largest, float(torch.max(dist)))
+            truth_squared += float(torch.sum(y.double() ** 2))
+            vectors += len(dist)
     return {
-        "pairs": len(examples),
-        "rms_cm": float(torch.sqrt(torch.mean(dist**2))),
-        "mean_cm": float(torch.mean(dist)),
-        "max_cm": float(torch.max(dist)),
-        "zero_offset_rms_cm": float(torch.sqrt(torch.mean(truth**2))),
+        unit: len(examples),
+        "rms_cm": float(np.sqrt(squared / vectors)),
+        "mean_cm": total / vectors,
+        "max_cm": largest,
+        "zero_offset_rms_cm": float(np.sqrt(truth_squared / vectors)),
     }
 
 
-def _prepare(take: Take, face: FaceSetup, config: TrainConfig, backend: str):
+def _prepare(take: Take, face: FaceSetup, config: TrainConfig, backend: str) -> Iterator[dict[str, np.ndarray]]:
+    """A take's kept frames (away from its ends) as store rows, PREPARE_FRAMES at a time."""
     pts = check_points(take.points, f"take {take.name!r} points")
     if pts.shape[1] != face.point_count:
         raise ValueError(f"take {take.name!r} has {pts.shape[1]} points, the face setup {face.point_count}")
@@ -201,52 +227,73 @@ def _prepare(take: Take, face: FaceSetup, config: TrainConfig, backend: str):
         raise ValueError(f"take {take.name!r} has {f} frames, too few to leave out {config.trim} at each end")
     t, q = check_transforms(take.translate, take.orient, f)
     samples = skull_space(pts[:, face.samples], t, q, take.space)
-    feats = compute_features(samples, t, q, face.landmarks, take.fps, space="skull", window=config.window, backend=backend)
-    skull = feats.skull if config.skull_motion is None else config.skull_motion.features(t, q, face.landmarks, take.fps)
+    skull = None if config.skull_motion is None else config.skull_motion.features(t, q, face.landmarks, take.fps)
     if config.target == "truth":
         if take.dynamics is None:
             raise ValueError(f"take {take.name!r} has no known dynamics to train on (target 'truth' needs a simulated corpus)")
-        dynamics = np.asarray(take.dynamics)
-        if dynamics.shape != pts.shape:
-            raise ValueError(f"take {take.name!r}: dynamics are {dynamics.shape}, its points {pts.shape}")
-        targets = dynamics[:, face.samples].astype(np.float32)
+        if np.shape(take.dynamics) != pts.shape:
+            raise ValueError(f"take {take.name!r}: dynamics are {np.shape(take.dynamics)}, its points {pts.shape}")
+        targets = take.dynamics  # sliced per chunk: a memory-mapped array stays on disk
     else:
         targets = dynamic_offsets(samples, space="skull", window=config.target_window).astype(np.float32)
-    return skull, feats.skin, targets, np.arange(config.trim, f - config.trim)
+    for a in range(config.trim, f - config.trim, PREPARE_FRAMES):
+        b = min(f - config.trim, a + PREPARE_FRAMES)
+        feats = compute_features(samples, t, q, face.landmarks, take.fps, space="skull", window=config.window, frame_range=(a, b), backend=backend)
+        chunk_targets = np.asarray(targets[a:b])
+        if config.target == "truth":
+            chunk_targets = chunk_targets[:, face.samples]
+        yield {"skull": feats.skull if skull is None else skull[a:b], "skin": feats.skin, "targets": chunk_targets}
 
 
-def _pairs(prepared: list, device: torch.device) -> PairSet | None:
-    if not prepared:
-        return None
-    offset, frames = 0, []
-    for skull, _, _, valid in prepared:
-        frames.append(valid + offset)
-        offset += len(skull)
-    return PairSet(
-        np.concatenate([p[0] for p in prepared]),
-        np.concatenate([p[1] for p in prepared]),
-        np.concatenate([p[2] for p in prepared]),
-        np.concatenate(frames),
-        device,
-    )
+def store_takes(takes: Iterable, prepare: Callable[[Take], Iterator[dict[str, np.ndarray]]],
+                scratch: Path | str | None = None) -> tuple[TrainingStore, list[dict], float]:
+    """(a store of every take's prepared rows, the takes' descriptions, their one frame rate).
+
+    ``takes`` may be any iterable of Take objects or dicts, a generator included: each take
+    is prepared and appended before the next is read, so a caller that reads takes lazily
+    holds one take in memory at a time.
+    """
+    store: TrainingStore | None = None
+    described: list[dict] = []
+    fps = None
+    try:
+        for value in takes:
+            take = Take.coerce(value)
+            rate = check_fps(take.fps)
+            if fps is None:
+                fps = rate
+            elif abs(rate - fps) > 1e-6 * fps:
+                raise ValueError(f"takes run at different frame rates ({described[0]['name']!r}: {fps}, {take.name!r}: {rate}); "
+                                 "a model is trained for one rate")
+            if any(d["name"] == take.name for d in described):
+                raise ValueError(f"take names must be unique, got {take.name!r} twice")
+            for arrays in prepare(take):
+                if store is None:
+                    store = TrainingStore({name: a.shape[1:] for name, a in arrays.items()}, scratch)
+                store.append(take.name, arrays)
+            described.append({"name": take.name, "frames": int(len(take.points)), "space": take.space})
+            del value, take, arrays  # before the next take is read
+        if not described:
+            raise ValueError("training needs at least one take")
+    except BaseException:
+        if store is not None:
+            store.close()
+        raise
+    store.finish()
+    return store, described, fps
 
 
-def split_takes(takes: Sequence, validation: Sequence[str] | None) -> tuple[list[Take], float, set[str]]:
-    """(takes as Take objects, their one frame rate, the names held out for validation)."""
-    takes = [Take.coerce(t) for t in takes]
-    if not takes:
-        raise ValueError("training needs at least one take")
-    rates = {t.name: check_fps(t.fps) for t in takes}
-    fps = rates[takes[0].name]
-    if any(abs(r - fps) > 1e-6 * fps for r in rates.values()):
-        raise ValueError(f"takes run at different frame rates {rates}; a model is trained for one rate")
-    return takes, fps, _split(takes, validation)
+def split_store(store: TrainingStore, described: list[dict], config: TrainConfig, items: int, make) -> tuple[StreamedExamples, StreamedExamples | None]:
+    """(training examples, validation examples or None) of a store; marks the held-out takes in ``described``."""
+    held = _split([d["name"] for d in described], config.validation)
+    for d in described:
+        d["validation"] = d["name"] in held
+    train = StreamedExamples(store, store.rows_of(d["name"] for d in described if not d["validation"]), items, make, config.resident_bytes)
+    val = StreamedExamples(store, store.rows_of(held), items, make, config.resident_bytes) if held else None
+    return train, val
 
 
-def _split(takes: list[Take], validation: Sequence[str] | None) -> set[str]:
-    names = [t.name for t in takes]
-    if len(set(names)) != len(names):
-        raise ValueError(f"take names must be unique, got {names}")
+def _split(names: list[str], validation: Sequence[str] | None) -> set[str]:
     if validation is None:
         return {names[-1]} if len(names) >= 2 else set()
     held = set(validation)
@@ -258,53 +305,52 @@ def _split(takes: list[Take], validation: Sequence[str] | None) -> set[str]:
     return held
 
 
-def _normalization(train: PairSet, max_pairs: int = 1_000_000, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Feature and target statistics from up to `max_pairs` random training pairs.
+def streamed_normalization(store: TrainingStore, names, inputs: Sequence[str], targets: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(input mean, input std, target mean, target scale) over the named takes' rows.
 
-    A large corpus holds tens of millions of pairs; their statistics are settled long
-    before that, and a float64 copy of all of them would not fit in memory.
+    Input statistics are per feature, each input column's over its own rows (F's skull
+    features per frame, its skin features per (frame, sample) pair); targets get a mean per
+    coordinate and one common scale, the RMS of their deviation from it.
     """
-    frames = train.frames.cpu().numpy()
-    rng = np.random.default_rng(seed)
-    pick = rng.choice(len(train), size=min(len(train), max_pairs), replace=False)
-    f, s = frames[pick // train.samples], pick % train.samples
-    skull = train.skull.cpu().numpy()[np.unique(frames)].astype(np.float64)
-    skin = train.skin.cpu().numpy()[f, s].astype(np.float64)
-    targets = train.targets.cpu().numpy()[f, s].astype(np.float64)
-    mean = np.concatenate([skull.mean(axis=0), skin.mean(axis=0)])
-    std = np.concatenate([skull.std(axis=0), skin.std(axis=0)])
-    out_mean = targets.mean(axis=0)
-    return mean, std, out_mean, float(np.sqrt(np.mean((targets - out_mean) ** 2)))
+    stats = [store.moments(column, names) for column in inputs]
+    out = store.moments(targets, names)
+    mean = np.concatenate([m.mean for m in stats])
+    std = np.sqrt(np.concatenate([m.variance for m in stats]))
+    return mean, std, out.mean, float(np.sqrt(np.mean(out.variance)))
 
 
 def train_removal(
-    takes: Sequence,
+    takes: Iterable,
     face: FaceSetup,
     config: TrainConfig | None = None,
     progress: ProgressCallback | None = None,
     backend: str = "auto",
+    *,
+    scratch: Path | str | None = None,
 ) -> DynamicsModel:
-    """Train network F on the takes (Take objects or dicts) for the given face setup.
+    """Train network F on the takes (Take objects or dicts, any iterable) for the given face setup.
 
     All takes must share one frame rate (the model's). Frames within ``config.trim`` of a
     take's ends are left out (their targets average over clamped windows). ``backend``
-    picks the feature implementation (facedyn.kernels.runtime.choose_backend).
+    picks the feature implementation (facedyn.kernels.runtime.choose_backend). The
+    examples go to a store in ``scratch`` (default: the system's temp folder), removed
+    afterwards; at most ``config.resident_bytes`` of them are in memory at once.
     """
     config = config or TrainConfig()
-    takes, fps, held = split_takes(takes, config.validation)
     device = resolve_device(config.device)
-    prepared = {t.name: _prepare(t, face, config, backend) for t in takes}
-    train = _pairs([prepared[t.name] for t in takes if t.name not in held], device)
-    val = _pairs([prepared[t.name] for t in takes if t.name in held], device)
-    del prepared  # the pair sets hold their own copies; a large corpus cannot afford both
-
-    spec: NetworkSpec = removal_spec(train.skull.shape[1], train.skin.shape[2])
-    network, curve = fit_new_network(spec, _normalization(train), train, val, config, device, progress)
-    errors = validation_errors(network, val, config.batch_size) if val is not None else None
+    store, described, fps = store_takes(takes, lambda take: _prepare(take, face, config, backend), scratch)
+    with store:
+        samples = store.columns["skin"][0]
+        train, val = split_store(store, described, config, samples, lambda a: PairSet(a["skull"], a["skin"], a["targets"], device))
+        names = [d["name"] for d in described if not d["validation"]]
+        spec: NetworkSpec = removal_spec(store.columns["skull"][0], store.columns["skin"][1])
+        normalization = streamed_normalization(store, names, ("skull", "skin"), "targets")
+        network, curve = fit_new_network(spec, normalization, train, val, config, device, progress)
+        errors = offset_errors(network, val, config.batch_size, "pairs") if val is not None else None
     network.cpu()
     info = {
         "training": {
-            "takes": [{"name": t.name, "frames": int(len(t.points)), "space": t.space, "validation": t.name in held} for t in takes],
+            "takes": described,
             "train_pairs": len(train),
             "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()},
             "device": str(device),

@@ -101,10 +101,7 @@ def build_corpus(
 ) -> dict:
     """Simulate (`jobs` takes at a time) and write every take of `specs`; return the corpus index."""
     progress = progress or Progress.silent()
-    output = Path(output)
-    output.mkdir(parents=True, exist_ok=True)
-    if not os.access(output, os.W_OK):
-        raise TakeError(f"{output}: corpus folder is not writable")
+    output = corpus_folder(output)
     started = time.perf_counter()
     written = 0.0
     takes = []
@@ -115,7 +112,21 @@ def build_corpus(
         written += time.perf_counter() - t0
         progress.advance()
     progress.finish()
-    total = time.perf_counter() - started
+    return write_corpus_index(output, rig, tissue, takes, description, jobs, written, time.perf_counter() - started)
+
+
+def corpus_folder(output: Path) -> Path:
+    """The corpus folder, created if needed; a clear error when it cannot be written."""
+    output = Path(output)
+    output.mkdir(parents=True, exist_ok=True)
+    if not os.access(output, os.W_OK):
+        raise TakeError(f"{output}: corpus folder is not writable")
+    return output
+
+
+def write_corpus_index(output: Path, rig: FaceRig, tissue: TissueParams | None, takes: list[dict], description: dict | None,
+                       jobs: int, written: float, total: float) -> dict:
+    """Write corpus.json for the written takes (write_simulated_take's entries, in order); return it."""
     frames = sum(t["frames"] for t in takes)
     index = {
         "rig": rig.name,

@@ -1,0 +1,182 @@
+"""`usdfacedyn batch` and `synth` on a local Dask cluster of 2 worker processes, on small
+simulated takes of the built-in face (a few seconds each)."""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import shutil
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed")
+
+from facedyn.batch.cluster import open_client, run_steps  # noqa: E402
+from facedyn.batch.command import add_batch_arguments, run_batch  # noqa: E402
+from facedyn.batch.corpus import build_corpus_on  # noqa: E402
+from facedyn.batch.plan import Models, plan_batch  # noqa: E402
+from facedyn.batch.state import STATE_FILE, file_checksum  # noqa: E402
+from facedyn.dynamics.face import FaceSetup  # noqa: E402
+from facedyn.dynamics.modelfile import save_model  # noqa: E402
+from facedyn.dynamics.synthesis import synthesis_config, train_synthesis  # noqa: E402
+from facedyn.dynamics.training import Take, TrainConfig, train_removal  # noqa: E402
+from facedyn.sim.corpus import TakeSpec, simulate_take  # noqa: E402
+from facedyn.sim.default_face import default_face  # noqa: E402
+from facedyn.usd.corpus import write_simulated_take  # noqa: E402
+from facedyn.usd.inspect import describe_take  # noqa: E402
+
+ALL_STEPS = "import,stabilize,remove,synthesize,preview"
+OUTPUTS = {"import": "capture.usdc", "stabilize": "stabilized.usdc", "remove": "quasistatic.usdc",
+           "synthesize": "synthesized.hop.usdc", "preview": "take.preview.usdc"}
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return default_face(8)
+
+
+@pytest.fixture(scope="module")
+def shots(tmp_path_factory, rig):
+    """Three walking captures (shots/shot<i>.usdc), a corrupt one, and tiny F and H (actor.*)."""
+    folder = tmp_path_factory.mktemp("shots")
+    sims = [simulate_take(rig, TakeSpec(f"shot{i}", "walk", "smile", duration_s=0.4, seed=i)) for i in range(3)]
+    for sim in sims:
+        write_simulated_take(folder / "sim" / sim.spec.name, sim, rig)
+        shutil.copy(folder / "sim" / sim.spec.name / "capture.usdc", folder / f"{sim.spec.name}.usdc")
+    (folder / "broken.usdc").write_bytes(b"not a usd file")
+    face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, sample_count=16)
+    takes = [Take(s.spec.name, s.captured, s.fps, s.skull_translate, s.skull_orient, "skull", s.offsets) for s in sims]
+    save_model(train_removal(takes, face, TrainConfig(epochs=1, trim=5, target="truth"), backend="numpy"), folder / "actor.removal")
+    truth = {s.spec.name: s.quasistatic for s in sims}
+    save_model(train_synthesis(takes, face, rig.uvs, truth, synthesis_config(epochs=1, trim=5), backend="numpy"), folder / "actor.synthesis")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def client():
+    with open_client(workers=2) as c:
+        yield c
+
+
+def batch_args(*argv: str):
+    parser = argparse.ArgumentParser()
+    add_batch_arguments(parser)
+    return parser.parse_args(list(argv))
+
+
+def statuses(results):
+    return {(r["take"], r["step"]): r["status"] for r in results}
+
+
+def layer_stack(take_folder: Path) -> list[tuple[str, str]]:
+    """(file name, processor) of the take's layers below its root."""
+    return [(Path(layer["layer"]).name, layer["processor"]) for layer in describe_take(take_folder / "take.usda")["layers"][1:]]
+
+
+def test_a_batch_completes_and_a_rerun_skips_every_step(shots, client, tmp_path):
+    out = tmp_path / "out"
+    models = Models(shots / "actor.removal", shots / "actor.synthesis", "hop")
+    takes = plan_batch([str(shots / "shot[01].usdc")], out, tuple(ALL_STEPS.split(",")), models)
+    first = run_steps(client, takes)
+    assert set(statuses(first).values()) == {"ok"}, [r for r in first if r["status"] != "ok"]
+    for name in ("shot0", "shot1"):
+        expected = [(OUTPUTS[s], s) for s in ("preview", "synthesize", "remove", "stabilize", "import")]
+        assert layer_stack(out / name) == expected
+        state = json.loads((out / name / STATE_FILE).read_text())
+        assert state["capture"]["sha256"] == file_checksum(shots / f"{name}.usdc")
+    again = run_steps(client, takes)
+    assert set(statuses(again).values()) == {"skipped"}
+    # a changed model makes its step and every later one stale, nothing before it
+    shutil.copy(shots / "actor.removal", tmp_path / "other.removal")
+    with open(tmp_path / "other.removal", "ab") as f:
+        f.write(b"\n")  # same model, other bytes: another checksum
+    other = plan_batch([str(shots / "shot0.usdc")], out, tuple(ALL_STEPS.split(",")),
+                       Models(tmp_path / "other.removal", shots / "actor.synthesis", "hop"))
+    changed = statuses(run_steps(client, other))
+    assert changed == {("shot0", "import"): "skipped", ("shot0", "stabilize"): "skipped", ("shot0", "remove"): "ok",
+                       ("shot0", "synthesize"): "ok", ("shot0", "preview"): "ok"}
+    forced = run_steps(client, takes[:1], force=True)
+    assert set(statuses(forced).values()) == {"ok"}
+
+
+def test_a_bad_capture_fails_alone_with_its_error_and_exit_code(shots, tmp_path, capsys):
+    args = batch_args(str(shots / "shot2.usdc"), str(shots / "broken.usdc"), str(shots / "missing.usdc"), "-o", str(tmp_path / "out"),
+                      "--steps", "import,stabilize", "--workers", "2", "--json")
+    assert run_batch(args) == 1
+    report = json.loads(capsys.readouterr().out)
+    by_take = {entry["take"]: entry for entry in report["takes"]}
+    assert report["succeeded"] is False and report["workers"] == 2
+    assert by_take["shot2"]["status"] == "ok"
+    assert [s["status"] for s in by_take["shot2"]["steps"]] == ["ok", "ok"]
+    broken = by_take["broken"]["steps"]
+    assert [s["status"] for s in broken] == ["failed", "blocked"]
+    assert broken[0]["error"].startswith("usdfacedyn: error:") and "broken.usdc" in broken[0]["error"]
+    assert "\n" not in broken[0]["error"]
+    missing = by_take["missing"]["steps"][0]
+    assert missing["status"] == "failed" and "missing.usdc" in missing["error"] and "No such file" in missing["error"]
+    assert layer_stack(tmp_path / "out" / "shot2") == [("stabilized.usdc", "stabilize"), ("capture.usdc", "import")]
+
+
+def test_batch_usage_errors(shots, tmp_path):
+    from facedyn.errors import UsageError
+
+    with pytest.raises(UsageError, match="needs a removal model"):
+        run_batch(batch_args(str(shots / "shot0.usdc"), "-o", str(tmp_path), "--steps", "import,remove"))
+    with pytest.raises(UsageError, match="pipeline order"):
+        run_batch(batch_args(str(shots / "shot0.usdc"), "-o", str(tmp_path), "--steps", "stabilize,import"))
+    with pytest.raises(UsageError, match="matches no file"):
+        run_batch(batch_args(str(shots / "nothing*.usdc"), "-o", str(tmp_path), "--steps", "import"))
+    listing = tmp_path / "shots.txt"
+    listing.write_text(f"# two shots\n{shots / 'shot0.usdc'}\n\n{shots / 'shot1.usdc'}\n")
+    takes = plan_batch([str(listing)], tmp_path / "out", ("import",), Models())
+    assert [plans[0].take for plans in takes] == ["shot0", "shot1"]
+
+
+def tree_checksums(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file() and p.name != "corpus.json"}
+
+
+def test_synth_on_the_cluster_writes_the_same_bytes_with_one_or_two_workers(rig, client, tmp_path):
+    specs = [TakeSpec(f"take{i}", motion, "smile", duration_s=0.3, seed=i) for i, motion in enumerate(("walk", "hop", "platform:9"))]
+    out = tmp_path / "corpus"
+    two = build_corpus_on(client, out, rig, specs)
+    on_two = tree_checksums(out)
+    shutil.rmtree(out)
+    with open_client(workers=1) as single:
+        one = build_corpus_on(single, out, rig, specs)
+    assert tree_checksums(out) == on_two and len(on_two) == 5 * len(specs)
+    assert one["takes"] == two["takes"] and [t["name"] for t in one["takes"]] == ["take0", "take1", "take2"]
+    assert (one["jobs"], two["jobs"]) == (1, 2)
+
+
+def test_killing_a_worker_mid_batch_still_completes_every_take(shots, client, tmp_path):
+    """Runs last in this module: the killed worker's nanny starts a new one."""
+    pids = client.run(os.getpid)
+    killed = []
+
+    def kill_a_busy_worker(result, results):
+        if killed:
+            return
+        busy = [address for address, keys in client.processing().items() if keys and address in pids]
+        if busy:
+            os.kill(pids[busy[0]], signal.SIGKILL)
+            killed.append(busy[0])
+
+    out = tmp_path / "out"
+    takes = plan_batch([str(shots / f"shot{i}.usdc") for i in range(3)], out, ("import", "stabilize", "remove", "preview"),
+                       Models(shots / "actor.removal"))
+    results = run_steps(client, takes, on_result=kill_a_busy_worker)
+    assert killed, "no worker was busy to kill"
+    # a finished step whose result died with the worker is recomputed elsewhere and finds its output current
+    assert set(statuses(results).values()) <= {"ok", "skipped"}, [r for r in results if r["status"] not in ("ok", "skipped")]
+    for i in range(3):
+        assert layer_stack(out / f"shot{i}") == [("take.preview.usdc", "preview"), ("quasistatic.usdc", "remove"),
+                                                 ("stabilized.usdc", "stabilize"), ("capture.usdc", "import")]
+        leftovers = [p.name for p in (out / f"shot{i}").iterdir() if p.name.startswith(".") and p.name not in (STATE_FILE, ".take.usda.lock")]
+        assert not leftovers  # no temporaries (the root's lock file is kept by design)
+    assert np.isfinite([r["seconds"] for r in results]).all()
