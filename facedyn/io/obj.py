@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facedyn.io.errors import InputError, read_lines
+from facedyn.io.errors import InputError
+from facedyn.io.files import read_lines
 from facedyn.performance import UVs
 
 if TYPE_CHECKING:
