@@ -51,13 +51,13 @@ def read_text(path: str | PathLike, max_bytes: int = MAX_TEXT_BYTES) -> str:
     handle, size = open_regular(path)
     with handle:
         if size > max_bytes:
-            raise InputError(path, f"is {size / 2**20:.0f} MiB, more than the {max_bytes / 2**20:.0f} MiB facedyn reads")
+            raise InputError(path, f"is {_size(size)}, more than the {_size(max_bytes)} facedyn reads")
         try:
             data = handle.read(max_bytes + 1)
         except OSError as exc:
             raise InputError(path, f"cannot read: {exc.strerror}") from None
     if len(data) > max_bytes:  # grew while being read
-        raise InputError(path, f"is more than the {max_bytes / 2**20:.0f} MiB facedyn reads")
+        raise InputError(path, f"is more than the {_size(max_bytes)} facedyn reads")
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -92,6 +92,10 @@ def write_atomically(path: str | PathLike, write: Callable[[BinaryIO], None]) ->
         if os.path.exists(tmp):
             os.unlink(tmp)
     return path
+
+
+def _size(count: int) -> str:
+    return f"{count / 2**20:.0f} MiB" if count >= 2**20 else f"{count} bytes"
 
 
 def _umask() -> int:
