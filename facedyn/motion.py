@@ -157,11 +157,12 @@ def from_bvh(path: str | PathLike, joint: str = "Head", duration_s: float | None
     `units`, `up` and `forward` are the file's (None: inferred, see
     facedyn.io.bvh.conventions); `fps` resamples (None keeps the file's rate);
     `duration_s` cuts a window, from the start when `seed` is None, else from a start
-    drawn from `seed`; `lowpass_hz` filters the capture first (None: raw).
+    drawn from `seed`; `lowpass_hz` filters the capture first (None, or a capture with
+    nothing above it, at 2 x lowpass_hz fps or less: raw).
     """
 
     trajectory = head_trajectory(path, joint, units=units, up=up, forward=forward)
-    if lowpass_hz is not None:
+    if lowpass_hz is not None and lowpass_hz < trajectory.fps / 2:
         trajectory = lowpass(trajectory, lowpass_hz)
     if fps is not None:
         trajectory = resample(trajectory, fps)

@@ -267,7 +267,8 @@ def _array_table(path: Path, table: dict, data_size: int) -> dict[str, tuple]:
         raise ModelFileError(f"{path} declares {len(table)} arrays, more than the {MAX_ARRAYS} a model may have")
     specs, expected = {}, 0
     for name, spec in table.items():
-        if not (isinstance(spec, dict) and spec.get("dtype") in _DTYPES and set(spec) == {"dtype", "shape", "offset"}):
+        if not (isinstance(spec, dict) and isinstance(spec.get("dtype"), str) and spec["dtype"] in _DTYPES
+                and set(spec) == {"dtype", "shape", "offset"}):
             raise ModelFileError(f"{path}: array {name!r} has a bad entry {str(spec)[:100]} (dtypes allowed: {sorted(_DTYPES)})")
         shape, offset = spec["shape"], spec["offset"]
         if not (isinstance(shape, list) and len(shape) <= MAX_DIMENSIONS and all(_whole(s) and s >= 0 for s in shape)):
