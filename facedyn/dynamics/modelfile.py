@@ -49,7 +49,7 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.network import Network, NetworkSpec
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.errors import FacedynError
-from facedyn.io.errors import InputError
+from facedyn.io.errors import InputError, quoted
 from facedyn.io.files import open_regular, write_atomically
 from facedyn.performance import Topology
 
@@ -363,7 +363,8 @@ def _architecture(path: Path, architecture, arrays: dict[str, np.ndarray]) -> Ne
         raise ModelFileError(f"{path}: architecture {str(architecture)[:100]} needs inputs, hidden (a list) and outputs")
     widths = [architecture.get("inputs"), *architecture["hidden"], architecture.get("outputs")]
     if len(widths) - 2 > MAX_HIDDEN_LAYERS or not all(_whole(w) and 1 <= w <= MAX_LAYER_WIDTH for w in widths):
-        raise ModelFileError(f"{path}: architecture declares layers {str(widths)[:100]}; a model has up to {MAX_HIDDEN_LAYERS} hidden layers of 1 to {MAX_LAYER_WIDTH} units")
+        raise ModelFileError(f"{path}: architecture declares {len(widths) - 2} hidden layers, widths {quoted(str(widths), 60)}; "
+                             f"a model has up to {MAX_HIDDEN_LAYERS} hidden layers of 1 to {MAX_LAYER_WIDTH} units")
     spec = NetworkSpec.from_json(architecture)
     expected = {"network/input_mean": (spec.inputs,), "network/input_std": (spec.inputs,),
                 "network/output_mean": (spec.outputs,), "network/output_scale": (1,)}

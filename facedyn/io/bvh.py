@@ -379,7 +379,12 @@ def conventions(bvh: Bvh, joint: str = "Head", *, units: float | None = None, up
     if forward is None:
         forward, source = _infer_forward(bvh, joints, up)
         how.append(f"forward {forward}: {source}")
-    rest_basis(forward, up)  # refuses axes that are not perpendicular
+    try:
+        rest_basis(forward, up)
+    except UsageError as exc:
+        if not how:
+            raise
+        raise InputError(bvh.path, f"{exc} ({', '.join(how)})") from None  # an inferred axis against a given one
     if units is None:
         units, source = _infer_units(bvh, joints, ends, np.array(_AXES[up]))
         how.append(f"units {units:g} cm: {source}")

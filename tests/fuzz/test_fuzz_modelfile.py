@@ -87,7 +87,7 @@ def damaged(draw, blob: bytes) -> bytes:
     else:
         target[path[-1]] = draw(st.sampled_from(ODD_VALUES))
     if category != "crafted value unsigned":
-        header["checksums"] = checksums(header["metadata"], header["arrays"], [data])
+        header["checksums"] = checksums(header.get("metadata"), header.get("arrays"), [data])
     text = json.dumps(header).encode()
     return blob[:8] + struct.pack("<Q", len(text)) + text + data
 

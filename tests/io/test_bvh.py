@@ -218,6 +218,8 @@ def test_arguments_override_what_the_file_says(tmp_path):
         bvh.head_trajectory(path, up="y")
     with pytest.raises(UsageError, match="perpendicular"):
         bvh.head_trajectory(path, up="+y", forward="-y")
+    with pytest.raises(InputError, match=r"mm.bvh: BVH forward axis '\+y' and up axis '\+y' must be perpendicular \(up \+y: root to Head\)"):
+        bvh.head_trajectory(path, forward="+y")
 
 
 def test_a_head_far_above_the_floor_names_what_to_set(tmp_path):
