@@ -293,7 +293,10 @@ def _whole(value) -> bool:
 
 
 def _number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    """A finite JSON number (ints beyond float range, which math.isfinite cannot take, are not)."""
+    if _whole(value):
+        return abs(value) <= 2**63
+    return isinstance(value, float) and math.isfinite(value)
 
 
 def _version(path: Path, metadata: dict) -> int:
@@ -393,7 +396,7 @@ def _topology(path: Path, arrays: dict[str, np.ndarray], point_count) -> Topolog
 
 
 def _indices(path: Path, name: str, values) -> np.ndarray:
-    if not (isinstance(values, list) and all(_whole(v) for v in values)):
+    if not (isinstance(values, list) and all(_whole(v) and 0 <= v < 2**31 for v in values)):
         raise ModelFileError(f"{path}: {name} must be a list of vertex indices")
     return np.asarray(values, np.int64)
 

@@ -86,7 +86,7 @@ def write_atomically(path: str | PathLike, write: Callable[[BinaryIO], None]) ->
     try:
         with os.fdopen(fd, "wb") as out:
             write(out)
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, new_file_mode())
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -98,7 +98,8 @@ def _size(count: int) -> str:
     return f"{count / 2**20:.0f} MiB" if count >= 2**20 else f"{count} bytes"
 
 
-def _umask() -> int:
+def new_file_mode() -> int:
+    """The permission bits an ordinary new file gets under this process's umask (0644 under 022)."""
     mask = os.umask(0)
     os.umask(mask)
-    return mask
+    return 0o666 & ~mask

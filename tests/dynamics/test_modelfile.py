@@ -206,6 +206,8 @@ def _set(*keys_and_value):
         (_set("metadata", "architecture", "hidden", [10**9, 128]), "of 1 to 65536 units"),
         (_set("metadata", "architecture", "hidden", [128, 64]), "stored network arrays do not match its architecture"),
         (_set("metadata", "skin_samples", [0.5, 2]), "skin_samples must be a list of vertex indices"),
+        (_set("metadata", "skin_samples", [10**20]), "skin_samples must be a list of vertex indices"),
+        (_set("metadata", "skull_landmarks", [[10**400, 0, 0]] * 3), "skull_landmarks must be a list of finite"),
         (_set("metadata", "skull_landmarks", [[0, 0, "nan"]] * 3), "skull_landmarks must be a list of finite"),
         (_set("metadata", "point_count", 7), "point_count 7 does not match the 80 rest points"),
         (_set("metadata", "version", True), "version 'True'; this facedyn reads facedyn-model versions 1, 2"),
@@ -219,7 +221,7 @@ def _set(*keys_and_value):
          "declares 301 arrays|declares 3\\d\\d arrays"),
     ],
     ids=["fps-nan", "fps-string", "fps-zero", "fps-huge", "fps-bool", "window-fraction", "kind", "100k-layers",
-         "giant-width", "architecture-mismatch", "samples-fraction", "landmark-nan", "point-count", "version-bool",
+         "giant-width", "architecture-mismatch", "samples-fraction", "samples-huge", "landmark-huge-int", "landmark-nan", "point-count", "version-bool",
          "version-3", "fractional-offset", "gap", "huge-shape", "too-many-dims", "object-dtype", "too-many-arrays"],
 )
 def test_crafted_headers_are_refused_before_allocating(tmp_path, edit, message):
