@@ -351,8 +351,9 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
         if isinstance(exc, FacedynError):
             raise
         raise ModelFileError(f"{path} is an incomplete or inconsistent model: {type(exc).__name__}: {str(exc)[:200]}") from None
-    if model.fingerprint != metadata["topology_fingerprint"]:
-        raise ModelFileError(f"{path}: its stored topology hashes to {model.fingerprint}, not the recorded {str(metadata['topology_fingerprint'])[:40]}")
+    recorded = metadata.get("topology_fingerprint")
+    if model.fingerprint != recorded:
+        raise ModelFileError(f"{path}: its stored topology hashes to {model.fingerprint}, not the recorded {str(recorded)[:40]}")
     if stored.checksums is None:
         model.warnings.append(f"{path} is model format version {metadata['version']}, written without checksums, so damage to it cannot be detected; re-save it (load and save it with this facedyn) to add them")
     network.eval()

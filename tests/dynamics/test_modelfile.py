@@ -210,6 +210,7 @@ def _set(*keys_and_value):
         (_set("metadata", "skull_landmarks", [[10**400, 0, 0]] * 3), "skull_landmarks must be a list of finite"),
         (_set("metadata", "skull_landmarks", [[0, 0, "nan"]] * 3), "skull_landmarks must be a list of finite"),
         (_set("metadata", "point_count", 7), "point_count 7 does not match the 80 rest points"),
+        (lambda h: h["metadata"].pop("topology_fingerprint"), "its stored topology hashes to [0-9a-f]{16}, not the recorded None"),
         (_set("metadata", "version", True), "version 'True'; this facedyn reads facedyn-model versions 1, 2"),
         (_set("metadata", "version", 3), "version '3'; this facedyn reads"),
         (_set("arrays", "network/input_mean", "offset", 0.5), "offset 0.5, not a whole number of bytes"),
@@ -221,7 +222,7 @@ def _set(*keys_and_value):
          "declares 301 arrays|declares 3\\d\\d arrays"),
     ],
     ids=["fps-nan", "fps-string", "fps-zero", "fps-huge", "fps-bool", "window-fraction", "kind", "100k-layers",
-         "giant-width", "architecture-mismatch", "samples-fraction", "samples-huge", "landmark-huge-int", "landmark-nan", "point-count", "version-bool",
+         "giant-width", "architecture-mismatch", "samples-fraction", "samples-huge", "landmark-huge-int", "landmark-nan", "point-count", "no-fingerprint", "version-bool",
          "version-3", "fractional-offset", "gap", "huge-shape", "too-many-dims", "object-dtype", "too-many-arrays"],
 )
 def test_crafted_headers_are_refused_before_allocating(tmp_path, edit, message):

@@ -2,7 +2,8 @@
 
 Damaged files (truncated, bytes flipped or inserted, random bytes, a wrong header length)
 and crafted ones (a header value replaced or a key dropped, with the checksums recomputed
-or not) of small removal and synthesis models.
+or not; or only the free-form training record changed, which must still load) of small
+removal and synthesis models.
 """
 import functools
 import json
@@ -25,7 +26,7 @@ from facedyn.performance import Topology
 ODD_VALUES = [float("nan"), float("inf"), -1, 0, 1, 1.5, 1e300, 10**20, -10**9, "x", "NaN", None, [], {}, True,
               [[0.0, 0.0, 0.0]] * 3, [10**6] * 4, {"inputs": 2}]
 CATEGORIES = ("unchanged", "truncated", "flipped bytes", "stray bytes", "random bytes", "header length",
-              "crafted value", "crafted value unsigned", "crafted key dropped")
+              "crafted value", "crafted value unsigned", "crafted key dropped", "crafted training record")
 
 
 @functools.lru_cache(maxsize=None)
@@ -39,7 +40,7 @@ def model_file(kind: str) -> bytes:
     torch.manual_seed(0)
     network = Network(NetworkSpec(12, (8, 8), 3 if kind == "removal" else 18))
     windows = {"skull": 2, "skin": 2, "target": 2} if kind == "removal" else {"stretch_smoothing": 2}
-    model = DynamicsModel(kind, network, face, 120.0, windows, {"training": {"takes": ["fuzz"]}, "validation": None},
+    model = DynamicsModel(kind, network, face, 120.0, windows, {"training": {"takes": [{"name": "fuzz", "frames": 9}], "device": "cpu"}, "validation": None},
                           skull_motion=None if kind == "removal" else SkullMotionInput("acceleration", 2, 1))
     with tempfile.TemporaryDirectory() as folder:
         return save_model(model, Path(folder) / "model").read_bytes()
@@ -60,6 +61,8 @@ def _paths(value, prefix=()):
 def damaged(draw, blob: bytes) -> bytes:
     category = draw(st.sampled_from(CATEGORIES))
     event(f"mutation: {category}")
+    if category == "unchanged":
+        return blob
     if category == "truncated":
         return blob[: draw(st.integers(0, len(blob) - 1))]
     if category == "flipped bytes":
@@ -76,7 +79,10 @@ def damaged(draw, blob: bytes) -> bytes:
         return blob[:8] + struct.pack("<Q", draw(st.integers(0, 2**64 - 1))) + blob[16:]
     (length,) = struct.unpack("<Q", blob[8:16])
     header, data = json.loads(blob[16:16 + length]), blob[16 + length:]
-    paths = [p for p in _paths({"metadata": header["metadata"], "arrays": header["arrays"]}) if p]
+    if category == "crafted training record":  # free-form: any JSON loads
+        paths = [("metadata",) + p for p in _paths({"training": header["metadata"]["training"]}) if p]
+    else:
+        paths = [p for p in _paths({"metadata": header["metadata"], "arrays": header["arrays"]}) if p]
     path = paths[draw(st.integers(0, len(paths) - 1))]
     event(f"crafted: {path[0]}/{path[1] if len(path) > 1 else ''}")
     target = header
