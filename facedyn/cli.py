@@ -264,15 +264,24 @@ def _cmd_list(args) -> int:
 
 
 def _cmd_env(args) -> int:
+    from facedyn.kernels.runtime import backend_report
     from facedyn.usd.plugin import export_line
 
     print(export_line())
+    report = backend_report()
+    print("# kernel backend: " + json.dumps(report, default=str))
     return EXIT_OK
 
 
 def _cmd_inspect(args) -> int:
     from facedyn.usd.inspect import describe_take, format_description
 
+    if args.path.is_file() and not args.path.suffix.lower().startswith(".usd"):
+        from facedyn.dynamics.modelfile import describe_model
+
+        model = describe_model(args.path)
+        print(json.dumps(model, indent=2, default=str) if args.json else "\n".join(f"{k}: {v}" for k, v in model.items()))
+        return EXIT_OK
     description = describe_take(args.path)
     print(json.dumps(description, indent=2, default=str) if args.json else format_description(description))
     return EXIT_OK

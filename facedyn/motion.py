@@ -150,17 +150,19 @@ a zero-phase low-pass at 10 Hz keeps gait, hops and the papers' 6-11 Hz band."""
 
 
 def from_bvh(path: str | PathLike, joint: str = "Head", duration_s: float | None = None, fps: float | None = None,
-             seed: int | None = None, *, units_to_cm: float | None = None, rest_forward: str = "+z",
-             rest_up: str = "+y", lowpass_hz: float | None = MOCAP_LOWPASS_HZ) -> SkullTrajectory:
+             seed: int | None = None, *, units: float | None = None, up: str | None = None,
+             forward: str | None = None, lowpass_hz: float | None = MOCAP_LOWPASS_HZ) -> SkullTrajectory:
     """A real skull trajectory from motion capture (see facedyn.io.bvh.head_trajectory).
 
-    `fps` resamples (None keeps the file's rate); `duration_s` cuts a window, from the
-    start when `seed` is None, else from a start drawn from `seed`; `lowpass_hz` filters
-    the capture first (None: raw).
+    `units`, `up` and `forward` are the file's (None: inferred, see
+    facedyn.io.bvh.conventions); `fps` resamples (None keeps the file's rate);
+    `duration_s` cuts a window, from the start when `seed` is None, else from a start
+    drawn from `seed`; `lowpass_hz` filters the capture first (None, or a capture with
+    nothing above it, at 2 x lowpass_hz fps or less: raw).
     """
 
-    trajectory = head_trajectory(path, joint, units_to_cm, rest_forward, rest_up)
-    if lowpass_hz is not None:
+    trajectory = head_trajectory(path, joint, units=units, up=up, forward=forward)
+    if lowpass_hz is not None and lowpass_hz < trajectory.fps / 2:
         trajectory = lowpass(trajectory, lowpass_hz)
     if fps is not None:
         trajectory = resample(trajectory, fps)

@@ -4,27 +4,41 @@ A model file never holds code, so loading one never runs any: it is
 
     8 bytes   magic b"FDYNMDL1"
     8 bytes   header length H, unsigned little-endian
-    H bytes   JSON header: {"metadata": {...}, "arrays": {name: {dtype, shape, offset}}}
-    ...       the arrays' raw little-endian bytes, offsets relative to the end of the header
+    H bytes   JSON header: {"metadata": {...}, "arrays": {name: {dtype, shape, offset}},
+              "checksums": {"metadata": sha256, "arrays": sha256}}
+    ...       the arrays' raw little-endian bytes, back to back in header order, offsets
+              relative to the end of the header
 
 (the layout of safetensors, written with the standard library). Only plain numeric dtypes
 are accepted; anything else, including a pickle or a torch checkpoint, is refused with
 `ModelFileError` before any of its data is read.
 
+Reading is safe against crafted files, not only against pickles: only regular files are
+opened, the header size and every declared count (arrays, dimensions, layers, widths) are
+bounded, the array table must tile the file exactly, and the architecture must match the
+arrays present before a network is allocated, so a file can never make facedyn allocate
+much more than its own size. Version 2 stores SHA-256 checksums of the metadata (its
+canonical JSON) and of the arrays (their table and bytes), verified on every load, so a
+damaged or edited file (flipped weight signs, a changed frame rate) is refused. They
+detect changes, they do not authenticate an author. Version 1 files, written before
+checksums, still load, with a warning in `DynamicsModel.warnings` saying to re-save them.
+
 The metadata says what the model may be used on: its kind ("removal" for F, "synthesis"
-for H), frame rate, feature windows (and for H the kind of skull-motion input), the topology's fingerprint, skull landmarks and skin
-sample indices, plus how it was trained (takes, settings, loss curve, validation errors).
-The arrays are the network's weights and normalization, the neutral mesh and rigid region
-that propagation is rebuilt from, and any kind-specific arrays (``DynamicsModel.arrays``,
-e.g. the uv neighbourhoods that H's stretch features need).
-`ModelMismatch` is raised when a model meets a mesh or a take it does not fit.
+for H), frame rate, feature windows (and for H the kind of skull-motion input), the
+topology's fingerprint, skull landmarks and skin sample indices, plus how it was trained
+(takes, settings, loss curve, validation errors). The arrays are the network's weights and
+normalization, the neutral mesh and rigid region that propagation is rebuilt from, and
+any kind-specific arrays (``DynamicsModel.arrays``, e.g. the uv neighbourhoods that H's
+stretch features need). `ModelMismatch` is raised when a model meets a mesh or a take it
+does not fit.
 """
 from __future__ import annotations
 
+import hashlib
 import json
-import os
+import math
 import struct
-import tempfile
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,13 +49,23 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.network import Network, NetworkSpec
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.errors import FacedynError
+from facedyn.io.errors import InputError, quoted
+from facedyn.io.files import open_regular, write_atomically
 from facedyn.performance import Topology
 
 MAGIC = b"FDYNMDL1"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+UNCHECKED_VERSIONS = (1,)  # readable, but written before checksums
 KINDS = ("removal", "synthesis")
+FPS_RANGE = (1.0, 10000.0)
+MAX_FILE_BYTES = 4 << 30
+MAX_HEADER_BYTES = 16 << 20
+MAX_ARRAYS = 256
+MAX_DIMENSIONS = 4
+MAX_HIDDEN_LAYERS = 16
+MAX_LAYER_WIDTH = 1 << 16
+MAX_WINDOW = 10000
 _DTYPES = {"float32": np.float32, "float64": np.float64, "int32": np.int32, "int64": np.int64}
-_MAX_HEADER = 64 << 20
 _RESERVED = ("format", "version", "kind", "fps", "windows", "architecture", "topology_fingerprint", "point_count", "skull_landmarks", "skin_samples", "normalization", "skull_motion")
 
 
@@ -63,6 +87,7 @@ class DynamicsModel:
     info: dict = field(default_factory=dict)  # training description, loss curve, validation
     arrays: dict[str, np.ndarray] = field(default_factory=dict)  # kind-specific data (e.g. H's uv neighbourhoods)
     skull_motion: SkullMotionInput | None = None  # what the network reads of the skull; None = the paper's B(t) over windows["skull"]
+    warnings: list[str] = field(default_factory=list)  # what loading could not verify (e.g. a file without checksums)
     _propagator: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -86,7 +111,7 @@ class DynamicsModel:
             theirs = topology if isinstance(topology, str) else topology.fingerprint()
             if theirs != self.fingerprint:
                 raise ModelMismatch(f"the {self.kind} model was trained on mesh topology {self.fingerprint}, but this mesh has topology {theirs}")
-        if fps is not None and abs(float(fps) - self.fps) > 1e-6 * self.fps:
+        if fps is not None and not abs(float(fps) - self.fps) <= 1e-6 * self.fps:
             raise ModelMismatch(f"the {self.kind} model was trained at {self.fps:g} fps, but this take runs at {float(fps):g} fps; its velocity windows would not match")
 
     def propagator(self):
@@ -98,8 +123,21 @@ class DynamicsModel:
         return self._propagator
 
 
+def checksums(metadata: dict, table: dict, data: Iterable[bytes]) -> dict[str, str]:
+    """SHA-256 of the metadata's canonical JSON, and of the array table's plus the bytes."""
+    arrays = hashlib.sha256(_canonical(table))
+    for chunk in data:
+        arrays.update(chunk)
+    return {"metadata": hashlib.sha256(_canonical(metadata)).hexdigest(), "arrays": arrays.hexdigest()}
+
+
+def _canonical(value) -> bytes:
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True).encode()
+
+
 def save_model(model: DynamicsModel, path) -> Path:
-    """Write the model to ``path`` atomically (temporary file, then rename)."""
+    """Write the model to ``path`` atomically (temporary file, then rename), mode 0644 under
+    the usual umask, as format version FORMAT_VERSION with its checksums."""
     path = Path(path)
     arrays = {f"network/{k}": v.detach().cpu().numpy() for k, v in model.network.state_dict().items()}
     face = model.face
@@ -128,105 +166,272 @@ def save_model(model: DynamicsModel, path) -> Path:
         **({"skull_motion": model.skull_motion.to_json()} if model.skull_motion is not None else {}),
         **model.info,
     }
-    table, offset = {}, 0
+    metadata = json.loads(json.dumps(metadata))  # as a reader will see it (tuples as lists, ...)
+    table, blobs, offset = {}, [], 0
     for name, arr in arrays.items():
-        arr = np.ascontiguousarray(arr)
         dtype = arr.dtype.name
         if dtype not in _DTYPES:
             raise ValueError(f"array {name} has dtype {dtype}; a model file holds only {sorted(_DTYPES)}")
-        arrays[name] = arr
+        blob = np.ascontiguousarray(arr, dtype=arr.dtype.newbyteorder("<")).tobytes()
         table[name] = {"dtype": dtype, "shape": list(arr.shape), "offset": offset}
-        offset += arr.nbytes
-    header = json.dumps({"metadata": metadata, "arrays": table}).encode()
+        blobs.append(blob)
+        offset += len(blob)
+    header = json.dumps({"metadata": metadata, "arrays": table, "checksums": checksums(metadata, table, blobs)}).encode()
     header += b" " * (-len(header) % 8)
+    if len(header) > MAX_HEADER_BYTES:
+        raise ValueError(f"the model's metadata takes {len(header)} bytes, more than the {MAX_HEADER_BYTES} a model header may")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as out:
-            out.write(MAGIC + struct.pack("<Q", len(header)) + header)
-            for arr in arrays.values():
-                out.write(arr.astype(arr.dtype.newbyteorder("<"), copy=False).tobytes())
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
-    return path
+
+    def write(out) -> None:
+        out.write(MAGIC + struct.pack("<Q", len(header)) + header)
+        for blob in blobs:
+            out.write(blob)
+
+    return write_atomically(path, write)
+
+
+@dataclass(frozen=True)
+class _Stored:
+    """A model file as read and checked: what it says, its arrays, its checksums."""
+
+    metadata: dict
+    arrays: dict[str, np.ndarray]
+    checksums: dict[str, str] | None  # None for versions before checksums
+    size: int
 
 
 def read_model_file(path) -> tuple[dict, dict[str, np.ndarray]]:
     """(metadata, arrays) of a model file, checked; nothing in it is ever executed."""
-    path = Path(path)
+    stored = _read(Path(path))
+    return stored.metadata, stored.arrays
+
+
+def _read(path: Path) -> _Stored:
     try:
-        blob = path.read_bytes()
-    except OSError as exc:
-        raise ModelFileError(f"cannot read model file {path}: {exc.strerror}") from exc
-    if blob[:8] != MAGIC:
-        raise ModelFileError(f"{path} is not a facedyn model file (it does not start with {MAGIC!r}); pickles and torch checkpoints are refused")
-    if len(blob) < 16:
-        raise ModelFileError(f"{path} is truncated")
-    (size,) = struct.unpack("<Q", blob[8:16])
-    if size > min(_MAX_HEADER, len(blob) - 16):
-        raise ModelFileError(f"{path} has a header of {size} bytes, more than the file holds")
-    try:
-        header = json.loads(blob[16: 16 + size])
-        metadata, table = header["metadata"], header["arrays"]
-    except (ValueError, KeyError, TypeError) as exc:
-        raise ModelFileError(f"{path} has an unreadable header: {exc}") from exc
-    data = memoryview(blob)[16 + size:]
+        handle, size = open_regular(path)
+    except InputError as exc:
+        raise ModelFileError(f"cannot read model file {exc}") from None
+    with handle:
+        if size > MAX_FILE_BYTES:
+            raise ModelFileError(f"{path} is {size} bytes, more than the {MAX_FILE_BYTES} a model file may be")
+        prefix = handle.read(16)
+        if prefix[:8] != MAGIC:
+            raise ModelFileError(f"{path} is not a facedyn model file (it does not start with {MAGIC!r}); pickles and torch checkpoints are refused")
+        if len(prefix) < 16:
+            raise ModelFileError(f"{path} is truncated")
+        (header_size,) = struct.unpack("<Q", prefix[8:16])
+        if header_size > MAX_HEADER_BYTES:
+            raise ModelFileError(f"{path} declares a header of {header_size} bytes, more than the {MAX_HEADER_BYTES} a model header may have")
+        if header_size > size - 16:
+            raise ModelFileError(f"{path} has a header of {header_size} bytes, more than the file holds")
+        header = _header(path, handle.read(header_size))
+        data_size = size - 16 - header_size
+        specs = _array_table(path, header["arrays"], data_size)
+        data = handle.read(data_size)
+    if len(data) != data_size:
+        raise ModelFileError(f"{path} changed while it was read")
+    metadata = header["metadata"]
+    version = _version(path, metadata)
+    stored_sums = header.get("checksums")
+    if version in UNCHECKED_VERSIONS:
+        sums = None
+    else:
+        sums = checksums(metadata, header["arrays"], [data])
+        for part in ("metadata", "arrays"):
+            if not isinstance(stored_sums, dict) or stored_sums.get(part) != sums[part]:
+                raise ModelFileError(f"{path}: its {part} do not match the checksum saved with them; the file was changed or damaged after it was written: re-save or retrain the model")
     arrays = {}
+    for name, (dtype, shape, offset, count) in specs.items():
+        arr = np.frombuffer(data, dtype=dtype, count=count, offset=offset).reshape(shape).astype(dtype.newbyteorder("="))
+        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            raise ModelFileError(f"{path}: array {name!r} holds NaN or infinite values")
+        arrays[name] = arr
+    return _Stored(metadata, arrays, sums, size)
+
+
+def _header(path: Path, raw: bytes) -> dict:
+    """The JSON header, checked for its three parts' types."""
+    try:
+        header = json.loads(raw)
+    except (ValueError, RecursionError) as exc:  # RecursionError: nesting thousands deep
+        raise ModelFileError(f"{path} has an unreadable header: {type(exc).__name__}: {str(exc)[:100]}") from None
+    if not (isinstance(header, dict) and isinstance(header.get("metadata"), dict) and isinstance(header.get("arrays"), dict)):
+        raise ModelFileError(f"{path} has an unreadable header: it needs 'metadata' and 'arrays' objects")
+    return header
+
+
+def _array_table(path: Path, table: dict, data_size: int) -> dict[str, tuple]:
+    """{name: (dtype, shape, byte offset, element count)}: plain dtypes, bounded shapes,
+    whole-number offsets, stored back to back and filling the data exactly."""
+    if len(table) > MAX_ARRAYS:
+        raise ModelFileError(f"{path} declares {len(table)} arrays, more than the {MAX_ARRAYS} a model may have")
+    specs, expected = {}, 0
     for name, spec in table.items():
-        try:
-            dtype = np.dtype(_DTYPES[spec["dtype"]]).newbyteorder("<")
-            shape = tuple(int(s) for s in spec["shape"])
-            offset = int(spec["offset"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ModelFileError(f"{path}: array {name!r} has a bad entry {spec!r} (dtypes allowed: {sorted(_DTYPES)})") from exc
-        count = int(np.prod(shape)) if shape else 1
-        end = offset + count * dtype.itemsize
-        if offset < 0 or any(s < 0 for s in shape) or end > len(data):
-            raise ModelFileError(f"{path}: array {name!r} lies outside the file")
-        arrays[name] = np.frombuffer(data[offset:end], dtype=dtype).reshape(shape).astype(dtype.newbyteorder("="))
-    return metadata, arrays
+        if not (isinstance(spec, dict) and isinstance(spec.get("dtype"), str) and spec["dtype"] in _DTYPES
+                and set(spec) == {"dtype", "shape", "offset"}):
+            raise ModelFileError(f"{path}: array {name!r} has a bad entry {str(spec)[:100]} (dtypes allowed: {sorted(_DTYPES)})")
+        shape, offset = spec["shape"], spec["offset"]
+        if not (isinstance(shape, list) and len(shape) <= MAX_DIMENSIONS and all(_whole(s) and s >= 0 for s in shape)):
+            raise ModelFileError(f"{path}: array {name!r} has shape {str(shape)[:100]}; a shape is up to {MAX_DIMENSIONS} whole numbers >= 0")
+        if not _whole(offset):
+            raise ModelFileError(f"{path}: array {name!r} has offset {offset!r}, not a whole number of bytes")
+        if offset != expected:
+            raise ModelFileError(f"{path}: array {name!r} starts at byte {offset}, not {expected} where the previous array ends")
+        dtype = np.dtype(_DTYPES[spec["dtype"]]).newbyteorder("<")
+        count = math.prod(shape)
+        expected = offset + count * dtype.itemsize
+        if expected > data_size:
+            raise ModelFileError(f"{path}: array {name!r} lies outside the file (ends at byte {expected} of {data_size})")
+        specs[name] = (dtype, tuple(shape), offset, count)
+    if expected != data_size:
+        raise ModelFileError(f"{path} holds {data_size - expected} bytes after its last array")
+    return specs
+
+
+def _whole(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _number(value) -> bool:
+    """A finite JSON number (ints beyond float range, which math.isfinite cannot take, are not)."""
+    if _whole(value):
+        return abs(value) <= 2**63
+    return isinstance(value, float) and math.isfinite(value)
+
+
+def _version(path: Path, metadata: dict) -> int:
+    version = metadata.get("version")
+    if metadata.get("format") != "facedyn-model" or not (_whole(version) and (version == FORMAT_VERSION or version in UNCHECKED_VERSIONS)):
+        readable = ", ".join(map(str, (*UNCHECKED_VERSIONS, FORMAT_VERSION)))
+        raise ModelFileError(f"{path} is format {str(metadata.get('format'))[:40]!r} version {str(version)[:20]!r}; this facedyn reads facedyn-model versions {readable}")
+    return version
 
 
 def load_model(path, *, topology: Topology | str | None = None, fps: float | None = None) -> DynamicsModel:
     """Load a model; with ``topology``/``fps`` given, check that it fits them (ModelMismatch)."""
-    metadata, arrays = read_model_file(path)
-    if metadata.get("format") != "facedyn-model" or metadata.get("version") != FORMAT_VERSION:
-        raise ModelFileError(f"{path} is format {metadata.get('format')!r} version {metadata.get('version')!r}; this facedyn reads facedyn-model version {FORMAT_VERSION}")
-    try:
-        spec = NetworkSpec.from_json(metadata["architecture"])
-        network = Network(spec)
-        state = {k[len("network/"):]: torch.from_numpy(v) for k, v in arrays.items() if k.startswith("network/")}
-        network.load_state_dict(state)
-        face = FaceSetup(
-            topology=Topology(arrays["face/face_vertex_counts"], arrays["face/face_vertex_indices"]),
-            rest_points=arrays["face/rest_points"],
-            samples=np.asarray(metadata["skin_samples"], np.int32),
-            landmarks=np.asarray(metadata["skull_landmarks"], np.float64),
-            rigid_vertices=arrays["face/rigid_vertices"],
-        )
-        model = DynamicsModel(
-            kind=metadata["kind"],
-            network=network,
-            face=face,
-            fps=float(metadata["fps"]),
-            windows={k: int(v) for k, v in metadata["windows"].items()},
-            info={k: v for k, v in metadata.items() if k not in _RESERVED},
-            arrays={k[len("extra/"):]: v for k, v in arrays.items() if k.startswith("extra/")},
-            skull_motion=_skull_motion(metadata),
-        )
-    except (KeyError, TypeError, RuntimeError, ValueError) as exc:
-        if isinstance(exc, FacedynError):
-            raise
-        raise ModelFileError(f"{path} is an incomplete or inconsistent model: {exc}") from exc
-    if model.fingerprint != metadata["topology_fingerprint"]:
-        raise ModelFileError(f"{path}: its stored topology hashes to {model.fingerprint}, not the recorded {metadata['topology_fingerprint']}")
-    network.eval()
+    model = _build(Path(path), _read(Path(path)))
     model.check_compatible(topology, fps)
     return model
 
 
-def _skull_motion(metadata: dict) -> SkullMotionInput | None:
-    """The recorded skull input; None (the paper's B(t)) for files that record none."""
-    return SkullMotionInput.from_json(metadata["skull_motion"]) if "skull_motion" in metadata else None
+def _build(path: Path, stored: _Stored) -> DynamicsModel:
+    """The model a checked file describes; every inconsistency is a ModelFileError."""
+    metadata, arrays = stored.metadata, stored.arrays
+    try:
+        spec = _architecture(path, metadata.get("architecture"), arrays)
+        kind, fps, windows = metadata["kind"], metadata["fps"], metadata["windows"]
+        if kind not in KINDS:
+            raise ModelFileError(f"{path}: kind {str(kind)[:40]!r} is none of {', '.join(KINDS)}")
+        if not (_number(fps) and FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
+            raise ModelFileError(f"{path}: fps {str(fps)[:40]} is not a frame rate from {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g}")
+        if not (isinstance(windows, dict) and all(_whole(w) and 0 <= w <= MAX_WINDOW for w in windows.values())):
+            raise ModelFileError(f"{path}: windows {str(windows)[:100]} are not whole numbers of frames from 0 to {MAX_WINDOW}")
+        if "skull_motion" not in metadata and "skull" not in windows:
+            raise ModelFileError(f"{path}: records neither its skull_motion input nor a skull window")
+        network = Network(spec)
+        network.load_state_dict({k[len("network/"):]: torch.from_numpy(v) for k, v in arrays.items() if k.startswith("network/")})
+        face = FaceSetup(
+            topology=_topology(path, arrays, metadata["point_count"]),
+            rest_points=arrays["face/rest_points"],
+            samples=_indices(path, "skin_samples", metadata["skin_samples"]),
+            landmarks=_points(path, "skull_landmarks", metadata["skull_landmarks"]),
+            rigid_vertices=arrays["face/rigid_vertices"],
+        )
+        model = DynamicsModel(
+            kind=kind,
+            network=network,
+            face=face,
+            fps=float(fps),
+            windows=dict(windows),
+            info={k: v for k, v in metadata.items() if k not in _RESERVED},
+            arrays={k[len("extra/"):]: v for k, v in arrays.items() if k.startswith("extra/")},
+            skull_motion=SkullMotionInput.from_json(metadata["skull_motion"]) if "skull_motion" in metadata else None,
+        )
+    except (KeyError, TypeError, RuntimeError, ValueError) as exc:
+        if isinstance(exc, FacedynError):
+            raise
+        raise ModelFileError(f"{path} is an incomplete or inconsistent model: {type(exc).__name__}: {str(exc)[:200]}") from None
+    recorded = metadata.get("topology_fingerprint")
+    if model.fingerprint != recorded:
+        raise ModelFileError(f"{path}: its stored topology hashes to {model.fingerprint}, not the recorded {str(recorded)[:40]}")
+    if stored.checksums is None:
+        model.warnings.append(f"{path} is model format version {metadata['version']}, written without checksums, so damage to it cannot be detected; re-save it (load and save it with this facedyn) to add them")
+    network.eval()
+    return model
+
+
+def _architecture(path: Path, architecture, arrays: dict[str, np.ndarray]) -> NetworkSpec:
+    """The network's shape, bounded and matching the stored weights, checked before any
+    network is allocated (so a header cannot declare a network larger than the file)."""
+    if not isinstance(architecture, dict) or not isinstance(architecture.get("hidden"), list):
+        raise ModelFileError(f"{path}: architecture {str(architecture)[:100]} needs inputs, hidden (a list) and outputs")
+    widths = [architecture.get("inputs"), *architecture["hidden"], architecture.get("outputs")]
+    if len(widths) - 2 > MAX_HIDDEN_LAYERS or not all(_whole(w) and 1 <= w <= MAX_LAYER_WIDTH for w in widths):
+        raise ModelFileError(f"{path}: architecture declares {len(widths) - 2} hidden layers, widths {quoted(str(widths), 60)}; "
+                             f"a model has up to {MAX_HIDDEN_LAYERS} hidden layers of 1 to {MAX_LAYER_WIDTH} units")
+    spec = NetworkSpec.from_json(architecture)
+    expected = {"network/input_mean": (spec.inputs,), "network/input_std": (spec.inputs,),
+                "network/output_mean": (spec.outputs,), "network/output_scale": (1,)}
+    for i, (a, b) in enumerate(zip(widths[:-1], widths[1:])):
+        expected[f"network/layers.{2 * i}.weight"] = (b, a)
+        expected[f"network/layers.{2 * i}.bias"] = (b,)
+    stored = {name: arr.shape for name, arr in arrays.items() if name.startswith("network/")}
+    if stored != expected:
+        differ = sorted(set(stored.items()) ^ set(expected.items()))[:3]
+        raise ModelFileError(f"{path}: the stored network arrays do not match its architecture {widths} (e.g. {differ})")
+    return spec
+
+
+def _topology(path: Path, arrays: dict[str, np.ndarray], point_count) -> Topology:
+    """The stored mesh topology, checked: polygons of 3+ corners indexing the rest points."""
+    counts, indices = arrays["face/face_vertex_counts"], arrays["face/face_vertex_indices"]
+    points = arrays["face/rest_points"]
+    if not (_whole(point_count) and points.ndim == 2 and len(points) == point_count):
+        raise ModelFileError(f"{path}: point_count {str(point_count)[:40]} does not match the {len(points)} rest points")
+    if counts.ndim != 1 or indices.ndim != 1 or (counts.size and not 3 <= counts.min() <= counts.max() <= indices.size) \
+            or int(counts.sum()) != indices.size:
+        raise ModelFileError(f"{path}: the stored face counts and indices do not describe polygons")
+    if indices.size and (indices.min() < 0 or indices.max() >= point_count):
+        raise ModelFileError(f"{path}: the stored face indices leave the {point_count} rest points")
+    return Topology(counts, indices)
+
+
+def _indices(path: Path, name: str, values) -> np.ndarray:
+    if not (isinstance(values, list) and all(_whole(v) and 0 <= v < 2**31 for v in values)):
+        raise ModelFileError(f"{path}: {name} must be a list of vertex indices")
+    return np.asarray(values, np.int64)
+
+
+def _points(path: Path, name: str, values) -> np.ndarray:
+    if not (isinstance(values, list) and all(isinstance(p, list) and len(p) == 3 and all(map(_number, p)) for p in values)):
+        raise ModelFileError(f"{path}: {name} must be a list of finite (x, y, z) points")
+    return np.asarray(values, np.float64).reshape(-1, 3)
+
+
+def describe_model(path) -> dict:
+    """What `usdfacedyn inspect MODEL` shows: the checked model's kind, what it fits, how it
+    was trained and validated, and its integrity (checksums, or warnings without them)."""
+    path = Path(path)
+    stored = _read(path)
+    model = _build(path, stored)
+    return {
+        "path": str(path),
+        "format_version": stored.metadata["version"],
+        "kind": model.kind,
+        "network": {"removal": "F", "synthesis": "H"}[model.kind],
+        "topology_fingerprint": model.fingerprint,
+        "point_count": model.face.point_count,
+        "fps": model.fps,
+        "windows": model.windows,
+        "skull_features": model.skull_input.to_json(),
+        "samples": int(len(model.face.samples)),
+        "landmarks": int(len(model.face.landmarks)),
+        "rigid_vertices": int(len(model.face.rigid_vertices)),
+        "architecture": model.network.spec.to_json(),
+        "parameters": int(sum(p.numel() for p in model.network.parameters())),
+        "training": model.info.get("training"),
+        "validation": model.info.get("validation"),
+        "checksum": stored.checksums,
+        "warnings": list(model.warnings),
+        "bytes": stored.size,
+    }

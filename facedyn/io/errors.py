@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from os import PathLike
-from pathlib import Path
 
 from facedyn.errors import FacedynError
 
@@ -23,11 +22,6 @@ class InputError(FacedynError):
         return type(self), (self.path, self.reason, self.line)
 
 
-def read_lines(path: str | PathLike) -> list[str]:
-    """A text file's lines, or an InputError naming the file (missing, unreadable, not text)."""
-    try:
-        return Path(path).read_text().splitlines()
-    except FileNotFoundError:
-        raise InputError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"cannot read: {exc}") from None
+def quoted(text: str, limit: int = 40) -> str:
+    """repr(text) cut to `limit` characters, for quoting a file's words in a one-line error."""
+    return repr(text) if len(text) <= limit else repr(text[:limit]) + "..."

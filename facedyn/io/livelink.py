@@ -9,6 +9,7 @@ weights, so the ARKit names are mapped onto the rig's shape names.
 from __future__ import annotations
 
 import csv
+import io
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -17,6 +18,7 @@ from os import PathLike
 import numpy as np
 
 from facedyn.io.errors import InputError
+from facedyn.io.files import read_text
 
 NOT_EXPRESSIONS = frozenset(
     {"Timecode", "BlendShapeCount", "HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch",
@@ -25,6 +27,10 @@ NOT_EXPRESSIONS = frozenset(
 """Live Link Face columns that are not expression weights."""
 
 STANDARD_RATES = (24, 25, 30, 48, 50, 60, 100, 120)
+CAPTURE_RATES = (1.0, 1000.0)
+"""Accepted rows per second (Live Link Face captures at 30 or 60)."""
+WEIGHT_RANGE = (-1.0, 2.0)
+"""Accepted expression weights: ARKit's 0..1 with room for overshoot (real takes reach 1.08)."""
 _TIMECODE = re.compile(r"^(\d+):(\d{1,2}):(\d{1,2})[:;](\d+(?:\.\d*)?)$")
 
 
@@ -105,13 +111,11 @@ def read_livelink_csv(path: str | PathLike, shape_names: Sequence[str], timecode
     skipped and counted. `timecode_fps` is the timecode rate; None infers it.
     """
     path = str(path)
+    text = read_text(path)
     try:
-        with open(path, newline="", encoding="utf-8-sig") as handle:
-            rows = [(line, row) for line, row in enumerate(csv.reader(handle), 1) if row]
-    except FileNotFoundError:
-        raise InputError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(path, f"cannot read: {exc}") from None
+        rows = [(line, row) for line, row in enumerate(csv.reader(io.StringIO(text, newline="")), 1) if row]
+    except csv.Error as exc:
+        raise InputError(path, f"not a readable CSV file: {exc}") from None
     if not rows:
         raise InputError(path, "empty file")
     header = [name.strip() for name in rows[0][1]]
@@ -137,9 +141,14 @@ def read_livelink_csv(path: str | PathLike, shape_names: Sequence[str], timecode
         seconds, _ = _seconds(np.array(fields, dtype=np.float64), timecode_fps)
     except ValueError as exc:
         raise InputError(path, str(exc)) from None
+    if not np.isfinite(seconds).all():
+        raise InputError(path, "timecode too large", good[int(np.argmin(np.isfinite(seconds)))][0])
     backwards = np.flatnonzero(np.diff(seconds) <= 0)
     if backwards.size:
         raise InputError(path, "timecode does not increase", good[backwards[0] + 1][0])
+    rate = _capture_rate(seconds, np.array(kept))
+    if not CAPTURE_RATES[0] <= rate <= CAPTURE_RATES[1]:
+        raise InputError(path, f"rows come at {rate:g} per second, not a capture rate ({CAPTURE_RATES[0]:g} to {CAPTURE_RATES[1]:g} fps)")
 
     driving = {shape: column for column, shapes in mapping.items() for shape in shapes}
     names = [shape for shape in shape_names if shape in driving]
@@ -149,7 +158,7 @@ def read_livelink_csv(path: str | PathLike, shape_names: Sequence[str], timecode
         times=seconds - seconds[0],
         weights=weights,
         names=names,
-        fps=_capture_rate(seconds, np.array(kept)),
+        fps=rate,
         unmapped=unmapped,
         skipped_rows=len(rows) - 1 - len(good),
         start_s=float(seconds[0]),
@@ -189,6 +198,10 @@ def _capture_rate(seconds: np.ndarray, rows: np.ndarray) -> float:
 
 def _numbers(path: str, line: int, words: list[str]) -> list[float]:
     try:
-        return [float(word) for word in words]
+        values = [float(word) for word in words]
     except ValueError:
         raise InputError(path, "expression weights must be numbers", line) from None
+    low, high = WEIGHT_RANGE
+    if not all(low <= value <= high for value in values):
+        raise InputError(path, f"expression weights must be finite numbers from {low:g} to {high:g} (ARKit's are 0 to 1)", line)
+    return values

@@ -16,11 +16,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from facedyn.io.errors import InputError, read_lines
+from facedyn.io.errors import InputError
+from facedyn.io.files import read_lines
 from facedyn.performance import UVs
 
 if TYPE_CHECKING:
     from facedyn.progress import Progress
+
+MAX_COORDINATE = 1e9
+"""The largest magnitude of a coordinate (anything beyond is garbage, or inf in float32)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,6 +89,8 @@ def read_obj(path: str | PathLike) -> ObjMesh:
                 uv_corners.extend(uv for _, uv in face)
     if not points:
         raise InputError(path, "no vertices")
+    if not counts:
+        raise InputError(path, f"no faces ({len(points)} vertices): facedyn needs a polygon mesh, not a point cloud")
     return ObjMesh(
         points=np.array(points, dtype=np.float32),
         face_vertex_counts=np.array(counts, dtype=np.int32),
@@ -99,9 +105,12 @@ def _floats(path: str, line: int, words: list[str], count: int) -> list[float]:
     if len(words) < count + 1:
         raise InputError(path, f"'{words[0]}' needs {count} numbers, got {len(words) - 1}", line)
     try:
-        return [float(word) for word in words[1 : count + 1]]
+        values = [float(word) for word in words[1 : count + 1]]
     except ValueError:
         raise InputError(path, f"'{words[0]}' values must be numbers", line) from None
+    if not all(abs(value) <= MAX_COORDINATE for value in values):
+        raise InputError(path, f"'{words[0]}' values must be finite numbers within ±{MAX_COORDINATE:g}", line)
+    return values
 
 
 def _corner(path: str, line: int, word: str, points: int, uvs: int) -> tuple[int, int | None]:

@@ -11,24 +11,35 @@ CPU device on a machine without a GPU).
 
 Backend choice for ``auto`` (see `choose_backend`): NumPy when there is no device; the
 OpenCL kernel on a GPU; on a CPU device, whichever of the two ran a representative batch
-faster, measured once per kernel and process, and NumPy when the caller gives nothing to
-measure (a CPU OpenCL device shares the cores NumPy already uses, so it wins only where
-measured).
+faster (a CPU OpenCL device shares the cores NumPy already uses, so it wins only where
+measured), and NumPy when the caller gives nothing to measure. The two backends agree to
+rounding, not to the bit, so a decision that changed from run to run would change outputs
+from run to run: each decision is made once per machine, device and facedyn version and
+kept in a small JSON file (`cache_path`, under $XDG_CACHE_HOME or ~/.cache), so the same
+inputs give the same bytes on every run. ``FACEDYN_BACKEND=opencl|numpy`` overrides
+``auto`` for the process; `backend_report` says what was chosen, why and where it is kept.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import json
 import os
 import threading
 import time
 from pathlib import Path
 from typing import Callable
 
+from facedyn import __version__
 from facedyn.errors import FacedynError
+from facedyn.io.errors import InputError
+from facedyn.io.files import read_text, write_atomically
 
 BACKENDS = ("auto", "opencl", "numpy")
+BACKEND_ENV = "FACEDYN_BACKEND"
 MEASURE_ROUNDS = 3  # timed runs per backend when auto measures
 KERNEL_DIR = Path(__file__).resolve().parent
+_CACHE_MAX_BYTES = 1 << 20
 
 
 class OpenCLUnavailable(FacedynError):
@@ -47,7 +58,8 @@ class _Runtime:
 _lock = threading.Lock()
 _runtime: _Runtime | None = None
 _failure: str | None = None
-_choices: dict[str, str] = {}
+_choices: dict[str, str] = {}  # this process's decisions, by kernel name
+_cache_problems: list[str] = []  # why the decision cache could not be read or written
 
 
 def _pick_device(cl):
@@ -161,14 +173,18 @@ def kernel(name: str, function: str):
 def choose_backend(requested: str, kernel_name: str, measure: Callable[[str], object] | None = None) -> str:
     """Resolve ``'auto' | 'opencl' | 'numpy'`` to ``'opencl'`` or ``'numpy'``.
 
-    ``'opencl'`` raises `OpenCLUnavailable` where there is no device. For ``'auto'`` the
-    rule is in the module docstring; ``measure(backend)`` runs a small representative batch
-    on that backend. It is called once per backend to warm up (program build, allocations)
-    and then MEASURE_ROUNDS times more, interleaved; the backend with the faster best run
-    is remembered per ``kernel_name`` for the rest of the process.
+    ``'opencl'`` raises `OpenCLUnavailable` where there is no device. ``'auto'`` follows
+    FACEDYN_BACKEND when it is set, else the decision kept for this device and kernel,
+    else makes it by the rule in the module docstring and keeps it: ``measure(backend)``
+    runs a small representative batch on that backend, once per backend to warm up
+    (program build, allocations) and then MEASURE_ROUNDS times more, interleaved, and the
+    backend with the faster best run wins. Without `measure` a CPU device gets NumPy for
+    this process only, so that a later measured call still decides.
     """
     if requested not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {requested!r}")
+    if requested == "auto":
+        requested = _override() or "auto"
     if requested == "numpy":
         return "numpy"
     if requested == "opencl":
@@ -176,21 +192,140 @@ def choose_backend(requested: str, kernel_name: str, measure: Callable[[str], ob
         return "opencl"
     if not available():
         return "numpy"
-    if kernel_name in _choices:
-        return _choices[kernel_name]
-    if is_gpu():
-        choice = "opencl"
-    elif measure is None:
-        choice = "numpy"
-    else:
-        timings = {"numpy": float("inf"), "opencl": float("inf")}
-        for backend in timings:
-            measure(backend)  # warm-up: program build, allocations
-        for _ in range(MEASURE_ROUNDS):  # interleaved, best of each: robust to a busy machine
+    if kernel_name not in _choices:
+        kept = _kept_decisions().get(kernel_name)
+        if kept is not None:
+            _choices[kernel_name] = kept["backend"]
+        elif is_gpu():
+            _choices[kernel_name] = _keep(kernel_name, "opencl", "a GPU device")
+        elif measure is None:
+            _choices[kernel_name] = "numpy"
+        else:
+            timings = {"numpy": float("inf"), "opencl": float("inf")}
             for backend in timings:
-                start = time.perf_counter()
-                measure(backend)
-                timings[backend] = min(timings[backend], time.perf_counter() - start)
-        choice = min(timings, key=timings.get)
-    _choices[kernel_name] = choice
-    return choice
+                measure(backend)  # warm-up: program build, allocations
+            for _ in range(MEASURE_ROUNDS):  # interleaved, best of each: robust to a busy machine
+                for backend in timings:
+                    start = time.perf_counter()
+                    measure(backend)
+                    timings[backend] = min(timings[backend], time.perf_counter() - start)
+            choice = min(timings, key=timings.get)
+            reason = "measured on a CPU device: " + ", ".join(f"{b} {t * 1e3:.2f} ms" for b, t in timings.items())
+            _choices[kernel_name] = _keep(kernel_name, choice, reason)
+    return _choices[kernel_name]
+
+
+def _override() -> str | None:
+    """FACEDYN_BACKEND as a backend name, None when unset or 'auto'."""
+    value = os.environ.get(BACKEND_ENV, "").strip().lower()
+    if value in ("", "auto"):
+        return None
+    if value not in BACKENDS:
+        raise FacedynError(f"{BACKEND_ENV} must be opencl, numpy or auto, got {os.environ[BACKEND_ENV]!r}")
+    return value
+
+
+def cache_path() -> Path:
+    """Where backend decisions are kept: $XDG_CACHE_HOME/facedyn/backends.json, else ~/.cache/facedyn/."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "facedyn" / "backends.json"
+
+
+def device_key() -> str:
+    """What a kept decision is valid for: the platform, device and driver, and this facedyn."""
+    device = runtime().device
+    parts = (device.platform.name, device.platform.version, device.name, device.driver_version)
+    return " | ".join(str(part).strip() for part in parts) + f" | facedyn {__version__}"
+
+
+def _read_cache() -> dict:
+    """The whole decision file, {} when it is absent or unreadable (the reason is kept)."""
+    path = cache_path()
+    try:
+        data = json.loads(read_text(path, _CACHE_MAX_BYTES))
+    except InputError as exc:
+        if exc.reason != "no such file":
+            _problem(f"ignored {exc}")
+        return {}
+    except ValueError as exc:
+        _problem(f"ignored {path}: not JSON ({exc})")
+        return {}
+    if not isinstance(data, dict):
+        _problem(f"ignored {path}: not a JSON object")
+        return {}
+    return data
+
+
+def _kept_decisions() -> dict[str, dict]:
+    """This device's kept decisions, {kernel: {"backend", "reason"}}, valid entries only."""
+    entries = _read_cache().get(device_key())
+    if not isinstance(entries, dict):
+        return {}
+    return {name: entry for name, entry in entries.items()
+            if isinstance(entry, dict) and entry.get("backend") in ("opencl", "numpy")}
+
+
+def _keep(kernel_name: str, backend: str, reason: str) -> str:
+    """Keep a decision for this device, unless another process kept one first (then that
+    one is returned, so that concurrent runs agree); a cache that cannot be written
+    leaves the decision to this process (see backend_report)."""
+    path = cache_path()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with _locked(path.with_name(path.name + ".lock")):
+            data = _read_cache()
+            entries = data.get(device_key())
+            if not isinstance(entries, dict):
+                entries = data[device_key()] = {}
+            kept = entries.get(kernel_name)
+            if isinstance(kept, dict) and kept.get("backend") in ("opencl", "numpy"):
+                return kept["backend"]
+            entries[kernel_name] = {"backend": backend, "reason": reason}
+            text = json.dumps(data, indent=1, sort_keys=True) + "\n"
+            write_atomically(path, lambda out: out.write(text.encode()))
+    except OSError as exc:
+        _problem(f"cannot write {path}: {exc.strerror or exc}; decisions last for this process only")
+    return backend
+
+
+def _problem(message: str) -> None:
+    if message not in _cache_problems:
+        _cache_problems.append(message)
+
+
+@contextlib.contextmanager
+def _locked(lock_path: Path):
+    """An exclusive lock between processes (POSIX), so two runs do not both decide."""
+    try:
+        import fcntl
+    except ImportError:  # Windows: the atomic rename still keeps the file whole
+        yield
+        return
+    with open(lock_path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def backend_report() -> dict:
+    """What `usdfacedyn env` prints: the override, the device, and every decision kept for
+    it (backend and why), plus this process's unkept ones and any cache problems."""
+    report = {
+        "override": os.environ.get(BACKEND_ENV) or None,
+        "device": None,
+        "opencl_unavailable": unavailable_reason(),
+        "device_key": None,
+        "cache": str(cache_path()),
+        "decisions": {},
+        "cache_problems": [],
+    }
+    if report["opencl_unavailable"] is None:
+        report["device"] = describe()
+        report["device_key"] = device_key()
+        report["decisions"] = _kept_decisions()
+        for name, backend in _choices.items():
+            report["decisions"].setdefault(name, {"backend": backend, "reason": "this process only (nothing was measured)"})
+    report["cache_problems"] = list(_cache_problems)
+    return report

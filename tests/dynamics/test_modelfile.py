@@ -1,6 +1,9 @@
 """Model files: round trip, refusing foreign files and pickles, mismatch errors."""
+import hashlib
 import json
+import os
 import pickle
+import stat
 import struct
 
 import numpy as np
@@ -9,7 +12,9 @@ import torch
 from synthetic_face import curved_sheet, top_rows
 
 from facedyn.dynamics.face import FaceSetup
-from facedyn.dynamics.modelfile import DynamicsModel, ModelFileError, ModelMismatch, load_model, read_model_file, save_model
+from facedyn.dynamics.modelfile import (
+    DynamicsModel, ModelFileError, ModelMismatch, checksums, describe_model, load_model, read_model_file, save_model,
+)
 from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec, removal_spec
 from facedyn.dynamics.skull_motion import SkullMotionInput
 
@@ -64,6 +69,7 @@ def test_files_without_a_skull_motion_record_read_as_the_papers_velocities(tmp_p
     header = json.loads(blob[16:16 + length])
     del header["metadata"]["skull_motion"]
     header["metadata"]["windows"] = {"skull": 7, "stretch_smoothing": 10}
+    header["checksums"] = checksums(header["metadata"], header["arrays"], [blob[16 + length:]])
     old = json.dumps(header).encode()
     (tmp_path / "old.fdyn").write_bytes(blob[:8] + struct.pack("<Q", len(old)) + old + blob[16 + length:])
     loaded = load_model(tmp_path / "old.fdyn")
@@ -121,3 +127,184 @@ def test_truncated_and_tampered_files_are_refused(tmp_path):
         load_model(tmp_path / "short.fdyn")
     with pytest.raises(ModelFileError, match="cannot read"):
         load_model(tmp_path / "missing.fdyn")
+
+
+def _parts(blob):
+    (length,) = struct.unpack("<Q", blob[8:16])
+    return json.loads(blob[16:16 + length]), blob[16 + length:]
+
+
+def craft(path, blob, edit=None, data=None, sign=True):
+    """Write `blob` with its header edited by `edit(header)` (and its data replaced), with
+    checksums recomputed when `sign`: a crafted file, not a damaged one."""
+    header, old_data = _parts(blob)
+    data = old_data if data is None else data
+    if edit is not None:
+        edit(header)
+    if sign:
+        header["checksums"] = checksums(header["metadata"], header["arrays"], [data])
+    text = json.dumps(header).encode()
+    path.write_bytes(b"FDYNMDL1" + struct.pack("<Q", len(text)) + text + data)
+    return path
+
+
+def test_models_are_written_like_layers_and_leave_nothing_behind(tmp_path):
+    old = os.umask(0o022)
+    try:
+        path = save_model(make_model(), tmp_path / "models" / "actor.removal")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644
+    assert [p.name for p in path.parent.iterdir()] == ["actor.removal"]
+    model = make_model()
+    model.info["format"] = "mine"
+    with pytest.raises(ValueError, match="reserved metadata keys"):
+        save_model(model, path)
+    assert [p.name for p in path.parent.iterdir()] == ["actor.removal"]
+    assert save_model(make_model(), tmp_path / "again").read_bytes() == path.read_bytes()  # same model, same bytes
+
+
+def test_changed_weights_or_metadata_fail_their_checksums(tmp_path):
+    blob = save_model(make_model(), tmp_path / "actor.fdyn").read_bytes()
+    header, data = _parts(blob)
+    weight = header["arrays"]["network/layers.4.weight"]
+    start, end = weight["offset"], weight["offset"] + 4 * int(np.prod(weight["shape"]))
+    flipped = np.frombuffer(data[start:end], "<f4") * -1  # the output layer's signs flipped
+    damaged = data[:start] + flipped.astype("<f4").tobytes() + data[end:]
+    with pytest.raises(ModelFileError) as error:
+        load_model(craft(tmp_path / "flipped.fdyn", blob, data=damaged, sign=False))
+    assert str(error.value) == (f"{tmp_path / 'flipped.fdyn'}: its arrays do not match the checksum saved with them; the file was "
+                                "changed or damaged after it was written: re-save or retrain the model")
+    with pytest.raises(ModelFileError, match="its metadata do not match the checksum"):
+        load_model(craft(tmp_path / "fps.fdyn", blob, lambda h: h["metadata"].update(fps=96.0), sign=False))
+    with pytest.raises(ModelFileError, match="its metadata do not match the checksum"):
+        load_model(craft(tmp_path / "none.fdyn", blob, lambda h: h.pop("checksums"), sign=False))
+
+
+def _set(*keys_and_value):
+    *keys, value = keys_and_value
+
+    def edit(header):
+        target = header
+        for key in keys[:-1]:
+            target = target[key]
+        target[keys[-1]] = value
+    return edit
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (_set("metadata", "fps", float("nan")), "fps nan is not a frame rate from 1 to 10000"),
+        (_set("metadata", "fps", "NaN"), "fps NaN is not a frame rate"),
+        (_set("metadata", "fps", 0), "fps 0 is not a frame rate"),
+        (_set("metadata", "fps", 1e300), "fps 1e[+]300 is not a frame rate"),
+        (_set("metadata", "fps", True), "fps True is not a frame rate"),
+        (_set("metadata", "windows", "skull", 1.5), "are not whole numbers of frames"),
+        (_set("metadata", "kind", "dance"), "kind 'dance' is none of removal, synthesis"),
+        (_set("metadata", "architecture", "hidden", [128] * 100_000), "a model has up to 16 hidden layers"),
+        (_set("metadata", "architecture", "hidden", [10**9, 128]), "of 1 to 65536 units"),
+        (_set("metadata", "architecture", "hidden", [128, 64]), "stored network arrays do not match its architecture"),
+        (_set("metadata", "skin_samples", [0.5, 2]), "skin_samples must be a list of vertex indices"),
+        (_set("metadata", "skin_samples", [10**20]), "skin_samples must be a list of vertex indices"),
+        (_set("metadata", "skull_landmarks", [[10**400, 0, 0]] * 3), "skull_landmarks must be a list of finite"),
+        (_set("metadata", "skull_landmarks", [[0, 0, "nan"]] * 3), "skull_landmarks must be a list of finite"),
+        (_set("metadata", "point_count", 7), "point_count 7 does not match the 80 rest points"),
+        (lambda h: h["metadata"].pop("topology_fingerprint"), "its stored topology hashes to [0-9a-f]{16}, not the recorded None"),
+        (_set("metadata", "version", True), "version 'True'; this facedyn reads facedyn-model versions 1, 2"),
+        (_set("metadata", "version", 3), "version '3'; this facedyn reads"),
+        (_set("arrays", "network/input_mean", "offset", 0.5), "offset 0.5, not a whole number of bytes"),
+        (_set("arrays", "network/input_mean", "offset", 1), "starts at byte 1, not 0 where the previous array ends"),
+        (_set("arrays", "network/input_mean", "shape", [10**12]), "lies outside the file"),
+        (_set("arrays", "network/input_mean", "shape", [1, 1, 1, 1, 1]), "a shape is up to 4 whole numbers"),
+        (_set("arrays", "network/input_mean", "dtype", "object"), "dtypes allowed"),
+        (lambda h: h["arrays"].update({f"extra/a{i}": {"dtype": "int32", "shape": [0], "offset": 0} for i in range(300)}),
+         "declares 301 arrays|declares 3\\d\\d arrays"),
+    ],
+    ids=["fps-nan", "fps-string", "fps-zero", "fps-huge", "fps-bool", "window-fraction", "kind", "100k-layers",
+         "giant-width", "architecture-mismatch", "samples-fraction", "samples-huge", "landmark-huge-int", "landmark-nan", "point-count", "no-fingerprint", "version-bool",
+         "version-3", "fractional-offset", "gap", "huge-shape", "too-many-dims", "object-dtype", "too-many-arrays"],
+)
+def test_crafted_headers_are_refused_before_allocating(tmp_path, edit, message):
+    blob = save_model(make_model(), tmp_path / "actor.fdyn").read_bytes()
+    path = craft(tmp_path / "crafted.fdyn", blob, edit)
+    with pytest.raises(ModelFileError, match=message) as error:
+        load_model(path)
+    assert str(error.value).startswith(str(path)) or str(path) in str(error.value)
+    assert "\n" not in str(error.value)
+
+
+def test_headers_that_are_not_model_headers(tmp_path):
+    blob = save_model(make_model(), tmp_path / "actor.fdyn").read_bytes()
+    cases = {
+        "deep.fdyn": b"[" * 100_000,
+        "latin.fdyn": b'{"metadata": "\xe9"}',
+        "list.fdyn": b"[1, 2]",
+    }
+    for name, header in cases.items():
+        (tmp_path / name).write_bytes(b"FDYNMDL1" + struct.pack("<Q", len(header)) + header)
+        with pytest.raises(ModelFileError, match=f"{name} has an unreadable header"):
+            load_model(tmp_path / name)
+    (tmp_path / "huge.fdyn").write_bytes(b"FDYNMDL1" + struct.pack("<Q", 2**40) + blob[16:])
+    with pytest.raises(ModelFileError, match="declares a header of 1099511627776 bytes, more than the 16777216"):
+        load_model(tmp_path / "huge.fdyn")
+    (tmp_path / "tail.fdyn").write_bytes(blob + b"\0" * 8)
+    with pytest.raises(ModelFileError, match="tail.fdyn holds 8 bytes after its last array"):
+        load_model(tmp_path / "tail.fdyn")
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="FIFOs are POSIX")
+def test_only_regular_files_are_read(tmp_path):
+    os.mkfifo(tmp_path / "pipe.fdyn")
+    with pytest.raises(ModelFileError, match="pipe.fdyn: is not a regular file"):
+        load_model(tmp_path / "pipe.fdyn")
+    if os.path.exists("/dev/zero"):
+        with pytest.raises(ModelFileError, match="/dev/zero: is not a regular file"):
+            load_model("/dev/zero")
+    with pytest.raises(ModelFileError, match="is a folder"):
+        load_model(tmp_path)
+
+
+def test_version_1_files_load_with_a_warning_and_re_save_as_version_2(tmp_path):
+    model = make_model()
+    blob = save_model(model, tmp_path / "new.fdyn").read_bytes()
+
+    def as_version_1(header):
+        header["metadata"]["version"] = 1
+        del header["checksums"]
+    old = craft(tmp_path / "old.fdyn", blob, as_version_1, sign=False)
+    loaded = load_model(old)
+    assert loaded.warnings == [f"{old} is model format version 1, written without checksums, so damage to it cannot be "
+                               "detected; re-save it (load and save it with this facedyn) to add them"]
+    x = torch.randn(5, 378)
+    with torch.no_grad():
+        np.testing.assert_array_equal(loaded.network(x).numpy(), model.network(x).numpy())
+    described = describe_model(old)
+    assert described["format_version"] == 1 and described["checksum"] is None and described["warnings"] == loaded.warnings
+    resaved = save_model(loaded, tmp_path / "resaved.fdyn")
+    assert resaved.read_bytes() == blob and load_model(resaved).warnings == []
+
+
+def test_describe_model_says_what_inspect_shows(tmp_path):
+    model = make_model("removal", removal_spec(615), SkullMotionInput())
+    path = save_model(model, tmp_path / "actor.removal")
+    header, data = _parts(path.read_bytes())
+    described = describe_model(path)
+    assert described == {
+        "path": str(path), "format_version": 2, "kind": "removal", "network": "F",
+        "topology_fingerprint": model.fingerprint, "point_count": 80, "fps": 120.0,
+        "windows": {"skull": 10, "skin": 10, "target": 10},
+        "skull_features": SkullMotionInput().to_json(), "samples": 12, "landmarks": len(model.face.landmarks),
+        "rigid_vertices": 16, "architecture": {"inputs": 678, "hidden": [128, 128], "outputs": 3, "activation": "relu"},
+        "parameters": 678 * 128 + 128 + 128 * 128 + 128 + 128 * 3 + 3,
+        "training": {"takes": [{"name": "walk", "frames": 300}]}, "validation": {"rms_cm": 0.01},
+        "checksum": header["checksums"], "warnings": [], "bytes": path.stat().st_size,
+    }
+    assert described["checksum"]["arrays"] == hashlib.sha256(
+        json.dumps(header["arrays"], sort_keys=True, separators=(",", ":")).encode() + data).hexdigest()
+
+
+def test_a_nan_frame_rate_never_matches(tmp_path):
+    loaded = load_model(save_model(make_model(), tmp_path / "actor.fdyn"))
+    with pytest.raises(ModelMismatch, match="runs at nan fps"):
+        loaded.check_compatible(fps=float("nan"))

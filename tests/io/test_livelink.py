@@ -140,3 +140,30 @@ def test_bad_inputs_name_the_file(tmp_path):
     backwards = _write(tmp_path, ["Timecode,JawOpen", "00:00:01:00.0,0.1", "00:00:00:01.0,0.2"], "bw.csv")
     with pytest.raises(InputError, match="bw.csv, line 3: timecode does not increase"):
         livelink.read_livelink_csv(backwards, RIG, timecode_fps=30)
+
+
+@pytest.mark.parametrize("weight", ["nan", "inf", "-inf", "1e30", "-3"])
+def test_weights_must_be_finite_and_near_arkits_range(tmp_path, weight):
+    path = _write(tmp_path, ["Timecode,JawOpen", "00:00:00:00.0,0.1", f"00:00:00:01.0,{weight}"])
+    with pytest.raises(InputError) as error:
+        livelink.read_livelink_csv(path, RIG, timecode_fps=30)
+    assert str(error.value) == f"{path}, line 3: expression weights must be finite numbers from -1 to 2 (ARKit's are 0 to 1)"
+
+
+def test_timecodes_beyond_any_capture_are_refused(tmp_path):
+    huge = _write(tmp_path, ["Timecode,JawOpen", "00:00:00:00.0,0.1", "9" * 400 + ":00:00:01.0,0.2"], "huge.csv")
+    with pytest.raises(InputError, match="huge.csv, line 3: timecode too large"):
+        livelink.read_livelink_csv(huge, RIG, timecode_fps=30)
+    dense = _write(tmp_path, ["Timecode,JawOpen", "00:00:00:00.0,0.1", "00:00:00:00.00001,0.2"], "dense.csv")
+    with pytest.raises(InputError, match=r"dense.csv: rows come at 3e\+06 per second, not a capture rate \(1 to 1000 fps\)"):
+        livelink.read_livelink_csv(dense, RIG, timecode_fps=30)
+
+
+def test_latin1_and_utf8_with_bom_are_read(tmp_path):
+    lines = "Timecode,JawOpen,Remarque\n00:00:00:00.0,0.1,été\n00:00:00:01.0,0.2,hiver\n"
+    for name, data in (("latin1.csv", lines.encode("latin-1")), ("bom.csv", lines.encode("utf-8-sig"))):
+        path = tmp_path / name
+        path.write_bytes(data)
+        curves = livelink.read_livelink_csv(path, RIG, timecode_fps=30)
+        np.testing.assert_allclose(curves.weights[:, 0], [0.1, 0.2], rtol=1e-6)
+        assert curves.unmapped == ["Remarque"]

@@ -119,8 +119,13 @@ def test_sequence_names_the_first_file_with_another_topology(tmp_path):
         ("v 0 0 zero\n", 1, "'v' values must be numbers"),
         ("v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nf 1/1 2/1 3\n", 5, "some face corners have texture coordinates and others do not"),
         ("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 x\n", 4, "bad vertex index 'x'"),
+        ("v 0 0 0\nv 1 nan 0\n", 2, "'v' values must be finite numbers within ±1e+09"),
+        ("v 0 0 0\nv 1 -inf 0\n", 2, "'v' values must be finite numbers within ±1e+09"),
+        ("v 0 0 0\nv 1e39 0 0\n", 2, "'v' values must be finite numbers within ±1e+09"),
+        ("v 0 0 0\nvt 0.5 inf\n", 2, "'vt' values must be finite numbers within ±1e+09"),
     ],
-    ids=["short-face", "past-end", "negative", "short-v", "bad-number", "mixed-uvs", "bad-index"],
+    ids=["short-face", "past-end", "negative", "short-v", "bad-number", "mixed-uvs", "bad-index", "nan", "inf",
+         "float32-overflow", "uv-inf"],
 )
 def test_malformed_files_name_file_and_line(tmp_path, text, line, reason):
     path = tmp_path / "bad.obj"
@@ -137,3 +142,14 @@ def test_missing_and_empty_files(tmp_path):
     empty.write_text("# nothing\n")
     with pytest.raises(InputError, match="empty.obj: no vertices"):
         obj.read_obj(empty)
+    cloud = tmp_path / "cloud.obj"
+    cloud.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+    with pytest.raises(InputError) as error:
+        obj.read_obj(cloud)
+    assert str(error.value) == f"{cloud}: no faces (3 vertices): facedyn needs a polygon mesh, not a point cloud"
+
+
+def test_latin1_comments_and_names_are_read(tmp_path):
+    path = tmp_path / "latin1.obj"
+    path.write_bytes("# exporté\no tête\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".encode("latin-1"))
+    np.testing.assert_array_equal(obj.read_obj(path).face_vertex_indices, [0, 1, 2])

@@ -1,0 +1,117 @@
+"""Model files, valid and mutated or crafted: a working model or a FacedynError naming the file.
+
+Damaged files (truncated, bytes flipped or inserted, random bytes, a wrong header length)
+and crafted ones (a header value replaced or a key dropped, with the checksums recomputed
+or not; or only the free-form training record changed, which must still load) of small
+removal and synthesis models.
+"""
+import functools
+import json
+import struct
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import torch
+from hypothesis import event, given
+from hypothesis import strategies as st
+from mutate import only_files, outcome
+
+from facedyn.dynamics.face import FaceSetup
+from facedyn.dynamics.modelfile import DynamicsModel, checksums, describe_model, load_model, save_model
+from facedyn.dynamics.network import Network, NetworkSpec
+from facedyn.dynamics.skull_motion import SkullMotionInput
+from facedyn.performance import Topology
+
+ODD_VALUES = [float("nan"), float("inf"), -1, 0, 1, 1.5, 1e300, 10**20, -10**9, "x", "NaN", None, [], {}, True,
+              [[0.0, 0.0, 0.0]] * 3, [10**6] * 4, {"inputs": 2}]
+CATEGORIES = ("unchanged", "truncated", "flipped bytes", "stray bytes", "random bytes", "header length",
+              "crafted value", "crafted value unsigned", "crafted key dropped", "crafted training record")
+
+
+@functools.lru_cache(maxsize=None)
+def model_file(kind: str) -> bytes:
+    """The bytes of a small saved model: a 6 x 5 grid face, 6 skin samples, a tiny MLP."""
+    x, y = np.meshgrid(np.arange(6.0), np.arange(5.0))
+    points = np.stack([x.ravel(), y.ravel(), 0.1 * x.ravel() ** 2], axis=1)
+    quads = [[r * 6 + c, r * 6 + c + 1, (r + 1) * 6 + c + 1, (r + 1) * 6 + c] for r in range(4) for c in range(5)]
+    topology = Topology(np.full(len(quads), 4, np.int32), np.array(quads, np.int32).ravel())
+    face = FaceSetup.build(topology, points, rigid_vertices=np.arange(6), sample_count=6)
+    torch.manual_seed(0)
+    network = Network(NetworkSpec(12, (8, 8), 3 if kind == "removal" else 18))
+    windows = {"skull": 2, "skin": 2, "target": 2} if kind == "removal" else {"stretch_smoothing": 2}
+    model = DynamicsModel(kind, network, face, 120.0, windows, {"training": {"takes": [{"name": "fuzz", "frames": 9}], "device": "cpu"}, "validation": None},
+                          skull_motion=None if kind == "removal" else SkullMotionInput("acceleration", 2, 1))
+    with tempfile.TemporaryDirectory() as folder:
+        return save_model(model, Path(folder) / "model").read_bytes()
+
+
+def _paths(value, prefix=()):
+    """Every (key path) inside a JSON value, lists included, at most 50 items per list."""
+    yield prefix
+    if isinstance(value, dict):
+        for key, item in value.items():
+            yield from _paths(item, prefix + (key,))
+    elif isinstance(value, list):
+        for index, item in enumerate(value[:50]):
+            yield from _paths(item, prefix + (index,))
+
+
+@st.composite
+def damaged(draw, blob: bytes) -> bytes:
+    category = draw(st.sampled_from(CATEGORIES))
+    event(f"mutation: {category}")
+    if category == "unchanged":
+        return blob
+    if category == "truncated":
+        return blob[: draw(st.integers(0, len(blob) - 1))]
+    if category == "flipped bytes":
+        data = bytearray(blob)
+        for _ in range(draw(st.integers(1, 4))):
+            data[draw(st.integers(0, len(data) - 1))] ^= draw(st.integers(1, 255))
+        return bytes(data)
+    if category == "stray bytes":
+        at = draw(st.integers(0, len(blob)))
+        return blob[:at] + draw(st.binary(min_size=1, max_size=16)) + blob[at:]
+    if category == "random bytes":
+        return draw(st.sampled_from([b"", b"FDYNMDL1"])) + draw(st.binary(max_size=512))
+    if category == "header length":
+        return blob[:8] + struct.pack("<Q", draw(st.integers(0, 2**64 - 1))) + blob[16:]
+    (length,) = struct.unpack("<Q", blob[8:16])
+    header, data = json.loads(blob[16:16 + length]), blob[16 + length:]
+    if category == "crafted training record":  # free-form: any JSON loads
+        paths = [("metadata",) + p for p in _paths({"training": header["metadata"]["training"]}) if p]
+    else:
+        paths = [p for p in _paths({"metadata": header["metadata"], "arrays": header["arrays"]}) if p]
+    path = paths[draw(st.integers(0, len(paths) - 1))]
+    event(f"crafted: {path[0]}/{path[1] if len(path) > 1 else ''}")
+    target = header
+    for key in path[:-1]:
+        target = target[key]
+    if category == "crafted key dropped" and isinstance(target, dict):
+        del target[path[-1]]
+    else:
+        target[path[-1]] = draw(st.sampled_from(ODD_VALUES))
+    if category != "crafted value unsigned":
+        header["checksums"] = checksums(header.get("metadata"), header.get("arrays"), [data])
+    text = json.dumps(header).encode()
+    return blob[:8] + struct.pack("<Q", len(text)) + text + data
+
+
+@given(st.data())
+def test_model_files_load_or_give_a_clear_error(data):
+    kind = data.draw(st.sampled_from(["removal", "synthesis"]))
+    raw = data.draw(damaged(model_file(kind)))
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "actor.model"
+        path.write_bytes(raw)
+        model = outcome([path], lambda: load_model(path))
+        if model is not None:
+            with torch.no_grad():
+                assert torch.isfinite(model.network(torch.zeros(4, model.network.spec.inputs))).all()
+            assert describe_model(path)["kind"] == model.kind and 1 <= model.fps <= 10000
+            again = load_model(save_model(model, Path(folder) / "resaved.model"))  # what loads, saves and loads again
+            assert again.fingerprint == model.fingerprint and again.warnings == []
+            only_files(Path(folder), {"actor.model", "resaved.model"})
+        else:
+            only_files(Path(folder), {"actor.model"})
