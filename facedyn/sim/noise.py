@@ -84,23 +84,26 @@ def add_tracker_noise(points: np.ndarray, fps: float, noise: TrackerNoise, surfa
     if noise.iid_cm > 0:
         out += rng.normal(0.0, noise.iid_cm, out.shape).astype(np.float32)
     if noise.temporal_cm > 0:
-        out += noise.temporal_cm * _smooth_in_time(rng.normal(size=out.shape), sigma_frames).astype(np.float32)
+        out += noise.temporal_cm * _smooth_in_time(rng, out.shape, sigma_frames).astype(np.float32)
     if noise.spatial_cm > 0:
         basis = _bump_basis(surface, noise.radius_cm, rng)
-        coefficients = _smooth_in_time(rng.normal(size=(frames, basis.shape[1], 3)), sigma_frames)
+        coefficients = _smooth_in_time(rng, (frames, basis.shape[1], 3), sigma_frames)
         out += noise.spatial_cm * np.einsum("nk,fkc->fnc", basis, coefficients).astype(np.float32)
     popped = _add_pops(out, fps, noise, surface, rng)
     valid = _drop_frames(out, noise, rng)
     return NoisyCapture(out, valid, popped)
 
 
-def _smooth_in_time(white: np.ndarray, sigma_frames: float) -> np.ndarray:
-    """Gaussian-filtered white noise along axis 0, rescaled to unit variance."""
+def _smooth_in_time(rng, shape: tuple[int, ...], sigma_frames: float) -> np.ndarray:
+    """Gaussian-filtered white noise along axis 0 with unit variance at every frame (drawn
+    with 4 sigma of margin on both sides, so the ends are as random as the middle)."""
     if sigma_frames < 0.5:
-        return white
-    kernel = np.exp(-0.5 * (np.arange(-4 * sigma_frames, 4 * sigma_frames + 1) / sigma_frames) ** 2)
-    gain = np.sqrt(np.sum((kernel / kernel.sum()) ** 2))
-    return gaussian_filter1d(white, sigma_frames, axis=0, mode="reflect") / gain
+        return rng.normal(size=shape)
+    margin = int(np.ceil(4 * sigma_frames))
+    white = rng.normal(size=(shape[0] + 2 * margin,) + tuple(shape[1:]))
+    smooth = gaussian_filter1d(white, sigma_frames, axis=0, mode="constant", truncate=4.0)[margin:-margin]
+    kernel = np.exp(-0.5 * (np.arange(-margin, margin + 1) / sigma_frames) ** 2)
+    return smooth / np.sqrt(np.sum((kernel / kernel.sum()) ** 2))
 
 
 def _bump_basis(surface: np.ndarray, radius: float, rng) -> np.ndarray:
