@@ -11,6 +11,8 @@ JSON object per take, all errors against the simulator's truth (face vertices, c
   figure before issue 17);
 - ``cli``: ``usdfacedyn import`` + ``usdfacedyn stabilize`` with their defaults (no rest,
   no mask: rigidity discovered), read back from the take;
+- ``api_default``: facedyn.stabilize.stabilize(points, fps) on the imported points, all
+  defaults (what the CLI runs once it leaves the schedule to stabilize(): see the report);
 - ``actor``: facedyn.stabilize.stabilize on the imported points with a prior, the rigid
   model built from the actor's other takes (each solved with the model so far, merged);
 - targets: within 1.5x the oracle, and median <= 0.005 / mean <= 0.010 cm where the oracle
@@ -114,15 +116,18 @@ def run_plain_cases(rig, data: Path) -> None:
             others = [t for t in tuned if t is not take]
             actor = build_actor([t.points for t in others], [t.fps for t in others])
             with_actor = stabilize(points, take.fps, prior=actor)
+            default = stabilize(points, take.fps)
             floor = take.errors(rig, oracle.translate, oracle.orient)
             record = {
                 "case": "stabilize plain capture", "rig": rig.name, "take": take.spec.name, "held_out": take.held_out,
                 "fps": take.fps, "frames": len(points), "dropped_frames": take.dropped,
                 "oracle": floor, "masked_readme": take.errors(rig, masked.translate, masked.orient),
-                "cli": take.cli, "cli_import_and_stabilize_seconds": take.cli_seconds, "actor": take.errors(rig, with_actor.translate, with_actor.orient),
+                "cli": take.cli, "cli_import_and_stabilize_seconds": take.cli_seconds,
+                "api_default": take.errors(rig, default.translate, default.orient), "actor": take.errors(rig, with_actor.translate, with_actor.orient),
                 "actor_takes": len(others),
             }
             record["cli_meets_targets"] = meets_targets(record["cli"], floor)
+            record["api_default_meets_targets"] = meets_targets(record["api_default"], floor)
             record["actor_meets_targets"] = meets_targets(record["actor"], floor)
             print(json.dumps(record), flush=True)
         smiles = [t for t in tuned if t.spec.expression == "smile"]

@@ -4,9 +4,9 @@ A caller marks them with ``valid`` (F,) bool; besides, a frame whose points are 
 (an exporter's hole) or exactly equal to the frame before (a tracker holding its last
 fit: real tracked points never repeat to the last bit) is dropped. A dropped frame would
 pin the skull where it was a frame ago, a step and a jerk in the solved motion, so the
-solvers see a stand-in instead: every vertex interpolated linearly in world space between
-the nearest tracked frames (held at the ends), a smooth rigid-enough bridge over a few
-frames that the spline then follows.
+solvers see a stand-in instead: every vertex interpolated in world space through the two
+nearest tracked frames on each side (a cubic, so the bridge keeps the head's acceleration;
+linear with fewer neighbours, held at the ends), which the spline then follows.
 """
 from __future__ import annotations
 
@@ -36,8 +36,20 @@ def bridge_dropped(world: np.ndarray, tracked: np.ndarray) -> np.ndarray:
     good = np.flatnonzero(tracked)
     for f in np.flatnonzero(~tracked):
         after = np.searchsorted(good, f)
-        before = good[after - 1] if after > 0 else good[0]
-        after = good[after] if after < len(good) else good[-1]
-        t = 0.0 if after == before else (f - before) / (after - before)
-        filled[f] = (1.0 - t) * world[before] + t * world[after]
+        neighbours = np.concatenate([good[max(after - 2, 0) : after], good[after : after + 2]])
+        if after in (0, len(good)):  # before the first or after the last tracked frame: hold it
+            neighbours = good[[min(after, len(good) - 1)]]
+        elif after == 1 or after == len(good) - 1:  # one side has a single neighbour: linear
+            neighbours = good[after - 1 : after + 1]
+        filled[f] = np.einsum("k,k...->...", _lagrange_weights(neighbours, f), world[neighbours].astype(np.float64))
     return filled
+
+
+def _lagrange_weights(nodes: np.ndarray, x: float) -> np.ndarray:
+    """Weights of the values at ``nodes`` that give the interpolating polynomial at x."""
+    nodes = nodes.astype(np.float64)
+    weights = np.ones(len(nodes))
+    for j, node in enumerate(nodes):
+        others = np.delete(nodes, j)
+        weights[j] = np.prod((x - others) / (node - others))
+    return weights
