@@ -6,9 +6,16 @@ Takes (120 fps, soft-tissue dynamics on, tracking noise 0.02 cm):
 - extreme: jaw open + funnel (about 4 cm of motion) while walking.
 For every method (mode pursuit and the baselines) one JSON object: median and mean vertex
 error (cm, face vertices, after one global rigid alignment), rotation (deg) and
-translation (cm) errors, and the solve time.
+translation (cm) errors, and the solve time. These solves are given the rig's true
+neutral as the rest and its bone attachment as the mask.
 
-    python benchmarks/bench_stabilize_accuracy.py [--rig ../shared/data/ict-facekit/ict_face_rig.usdc]
+``--plain`` runs the plain-capture cases instead (issue 17): takes that carry nothing but
+points, with a tracker's noise (i.i.d., correlated in time and over the surface, pops,
+dropped frames: facedyn.sim.noise), exported as mesh caches in metres, Z up, first frame
+1001, imported and stabilized with the console defaults (benchmarks/plain_capture.py);
+see plain_cases below.
+
+    python benchmarks/bench_stabilize_accuracy.py [--rig ../shared/data/ict-facekit/ict_face_rig.usdc] [--plain]
 """
 from __future__ import annotations
 
@@ -41,6 +48,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rig", type=Path, help="UsdSkel blend-shape rig (default: the built-in face)")
     parser.add_argument("--iterations", type=int, default=12)
+    parser.add_argument("--plain", action="store_true", help="the plain-capture cases (no rest, no mask) instead")
     args = parser.parse_args()
     if args.rig:
         from facedyn.usd.rig import read_blendshape_rig
@@ -48,6 +56,11 @@ def main() -> None:
         rig = read_blendshape_rig(args.rig)
     else:
         rig = default_face()
+    if args.plain:
+        from bench_stabilize_plain import run_plain_cases
+
+        run_plain_cases(rig, DATA)
+        return
     weights = rig.rigid_weights.astype(np.float64)
     three = tuple(rig.landmarks[k] for k in ("eye_corner_left", "eye_corner_right", "nose_base"))
     from facedyn.stabilize.schedule import Schedule

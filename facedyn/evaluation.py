@@ -13,15 +13,16 @@ import numpy as np
 from facedyn.geometry import quaternion, rigid
 
 
-def stabilization_errors(solved_translate: np.ndarray, solved_orient: np.ndarray, true_translate: np.ndarray,
-                         true_orient: np.ndarray, true_skull: np.ndarray, vertices: np.ndarray | None = None) -> dict:
-    """Vertex (cm), rotation (deg) and translation (cm) errors of solved skull transforms.
+def implied_skull_transforms(solved_translate: np.ndarray, solved_orient: np.ndarray, true_translate: np.ndarray,
+                             true_orient: np.ndarray, true_skull: np.ndarray, vertices: np.ndarray | None = None):
+    """Solved skull transforms expressed in the true skull frame, and that frame change.
 
-    true_skull: (F, N, 3) the noise-free skin in true skull space (y + u); translate/orient
-    map skull to world. The true world skin is taken into the solved skull space with the
-    solved transforms, so the vertex error measures the transforms alone (not tracking
-    noise); that sequence is aligned to the true one by one global rigid transform G,
-    and the solved skull transform then corresponds to T_solved G^-1, compared with T_true.
+    true_skull: (F, N, 3) the noise-free skin in true skull space; translate/orient map
+    skull to world. The true world skin is taken into the solved skull space with the
+    solved transforms; that sequence is aligned to the true one by one global rigid
+    transform G (over ``vertices``), and the solved skull transform then corresponds to
+    T_solved G^-1. Returns (rotation (F, 3, 3), translate (F, 3), G as (rot, trans),
+    the aligned solved skin (F*V, 3), the true skin (F*V, 3)).
     """
     world = np.einsum("fij,fnj->fni", quaternion.to_matrix(true_orient), true_skull) + true_translate[:, None]
     r_s = quaternion.to_matrix(solved_orient)
@@ -30,12 +31,22 @@ def stabilization_errors(solved_translate: np.ndarray, solved_orient: np.ndarray
     source = solved_skull[:, vertices].reshape(-1, 3).astype(np.float64)
     target = true_skull[:, vertices].reshape(-1, 3).astype(np.float64)
     g_rot, g_trans = rigid.kabsch(source, target)
-    aligned = source @ g_rot.T + g_trans
-    distance = np.linalg.norm(aligned - target, axis=1)
     # Solved skull -> world is R_s x + t_s; in true skull coordinates x = G^-1 y, so the
     # implied skull transform is R_s G_r^T y + (t_s - R_s G_r^T g_t).
-    r_solved = quaternion.to_matrix(solved_orient) @ g_rot.T
+    r_solved = r_s @ g_rot.T
     t_solved = solved_translate - np.einsum("fij,j->fi", r_solved, g_trans)
+    return r_solved, t_solved, (g_rot, g_trans), source @ g_rot.T + g_trans, target
+
+
+def stabilization_errors(solved_translate: np.ndarray, solved_orient: np.ndarray, true_translate: np.ndarray,
+                         true_orient: np.ndarray, true_skull: np.ndarray, vertices: np.ndarray | None = None) -> dict:
+    """Vertex (cm), rotation (deg) and translation (cm) errors of solved skull transforms,
+    measured in the true skull frame (implied_skull_transforms), so that the vertex error
+    measures the transforms alone (not tracking noise)."""
+    vertices = np.arange(true_skull.shape[1]) if vertices is None else np.asarray(vertices)
+    r_solved, t_solved, _, aligned, target = implied_skull_transforms(
+        solved_translate, solved_orient, true_translate, true_orient, true_skull, vertices)
+    distance = np.linalg.norm(aligned - target, axis=1)
     r_true = quaternion.to_matrix(true_orient)
     relative = np.einsum("fji,fjk->fik", r_true, r_solved)
     angle = np.degrees(np.arccos(np.clip((np.trace(relative, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)))
@@ -52,6 +63,32 @@ def stabilization_errors(solved_translate: np.ndarray, solved_orient: np.ndarray
         "max_rotation_deg": float(np.max(angle)),
         "mean_translation_cm": float(np.mean(shift)),
     }
+
+
+def landmark_acceleration_error(solved_translate: np.ndarray, solved_orient: np.ndarray, true_translate: np.ndarray,
+                                true_orient: np.ndarray, true_skull: np.ndarray, landmarks: np.ndarray, fps: float,
+                                vertices: np.ndarray | None = None) -> float:
+    """RMS error of the skull landmarks' accelerations in the skull frame (what the
+    networks read, facedyn.dynamics.skull_motion) computed from the solved skull, as a
+    fraction of their true RMS. landmarks: (L, 3) in true skull space."""
+    from facedyn.dynamics.skull_motion import skull_accelerations
+
+    r_solved, t_solved, *_ = implied_skull_transforms(
+        solved_translate, solved_orient, true_translate, true_orient, true_skull, vertices)
+    solved = skull_accelerations(t_solved, quaternion.from_matrix(r_solved), landmarks, fps)[1:-1]
+    truth = skull_accelerations(true_translate, true_orient, landmarks, fps)[1:-1]
+    return float(np.sqrt(np.mean((solved - truth) ** 2)) / np.sqrt(np.mean(truth**2)))
+
+
+def skull_frame_disagreement(frame_a: tuple[np.ndarray, np.ndarray], frame_b: tuple[np.ndarray, np.ndarray],
+                             points: np.ndarray) -> float:
+    """Median distance (cm) between ``points`` (true skull space) taken into two solved
+    skull frames, each given as the (rot, trans) G that implied_skull_transforms returns:
+    how far two takes' skull spaces are apart (0 when they share one)."""
+    (ra, ta), (rb, tb) = frame_a, frame_b
+    pa = (np.asarray(points, dtype=np.float64) - ta) @ ra  # G_a^-1 y
+    pb = (np.asarray(points, dtype=np.float64) - tb) @ rb
+    return float(np.median(np.linalg.norm(pa - pb, axis=1)))
 
 
 def residual_fraction(estimate: np.ndarray, truth: np.ndarray, true_offsets: np.ndarray, vertices: np.ndarray | None = None) -> dict:

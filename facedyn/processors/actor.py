@@ -94,14 +94,16 @@ def _from_neutral(path: Path, params: dict, name: str):
 
 
 def _from_takes(paths: list[Path], params: dict, name: str):
+    """The rigid mode found on the first take, each later take registered to it and merged in."""
     from facedyn.processors.import_take import read_usd_mesh
-    from facedyn.stabilize.rigidity import estimate_actor
+    from facedyn.stabilize.rigidity import estimate_rigidity
 
-    meshes = [read_usd_mesh(path, params["mesh"]) for path in paths]
-    first = meshes[0]
-    for path, mesh in zip(paths[1:], meshes[1:]):
-        if mesh.topology.fingerprint() != first.topology.fingerprint():
+    first, found = None, None
+    for path in paths:
+        mesh = read_usd_mesh(path, params["mesh"])
+        if first is not None and mesh.topology.fingerprint() != first.topology.fingerprint():
             raise UsageError(f"{path}: its mesh topology differs from {paths[0]}'s; an actor has one topology")
-    found = estimate_actor([mesh.points for mesh in meshes], [mesh.fps for mesh in meshes])
+        model = estimate_rigidity(mesh.points, prior=found)
+        found, first = (model if found is None else found.merge(model)), first or mesh
     return _actor(name, "takes", params["samples"], neutral=found.rest, topology=first.topology, uvs=first.uvs,
                   rigid_weights=found.weights.astype(np.float32))

@@ -39,7 +39,7 @@ def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head",
     path = Path(source)
     if not path.exists():
         raise UsageError(f"skull motion {source!r}: not a file, nor one of {', '.join(PROCEDURAL)}, platform:HZ")
-    if path.suffix.lower() == ".bvh":
+    if not path.suffix.lower().startswith(".usd"):  # anything but USD is read as mocap, which names what is wrong
         trajectory = motion.from_bvh(path, joint)
         if trajectory.fps != fps:
             trajectory = motion.resample(trajectory, fps)

@@ -3,7 +3,9 @@
 Input is the tracked mesh in world space (F, N, 3); output is the skull transform per
 frame in facedyn's convention (skull -> world: world = R(orient) skull + translate),
 the stabilized (skull-space) points, the rest mesh, a per-frame solve error, and, for
-mode pursuit, the energy per stage and timings.
+mode pursuit, the energy per stage, timings, and the rigid model it solved with (weights
+and rest, discovered from the data unless given: facedyn.stabilize.rigidity), which an
+actor keeps so that its later takes start from it.
 """
 from __future__ import annotations
 
@@ -15,8 +17,10 @@ import numpy as np
 from facedyn.geometry import dualquat, quaternion, rigid
 from facedyn.stabilize import baselines
 from facedyn.stabilize import rest as rest_estimate
+from facedyn.stabilize.dropped import bridge_dropped, tracked_frames
 from facedyn.stabilize.fast import FastSolver
 from facedyn.stabilize.modepursuit import StageRecord, mode_pursuit
+from facedyn.stabilize.rigidity import RigidModel, estimate_rigidity
 from facedyn.stabilize.schedule import Schedule
 
 METHODS = ("three-point", "procrustes", "icp", "mode-pursuit")
@@ -37,6 +41,8 @@ class StabilizeResult:
     energy: float | None = None  # mode pursuit: final energy at the last widths
     history: list[StageRecord] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    model: RigidModel | None = None  # mode pursuit: the weights and rest it solved with (an actor's prior)
+    tracked: np.ndarray | None = None  # (F,) bool: False on dropped frames (bridged, facedyn.stabilize.dropped)
 
 
 def _check_inputs(world, fps, rest, weights):
@@ -47,8 +53,13 @@ def _check_inputs(world, fps, rest, weights):
         raise ValueError(f"need at least 1 frame and 3 points, got {world.shape}")
     if not np.issubdtype(world.dtype, np.floating):
         world = world.astype(np.float64)
-    if not all(np.isfinite(world[f : f + 4096]).all() for f in range(0, len(world), 4096)):
-        raise ValueError("world_points contain NaN or infinite values")
+    for f in range(0, len(world), 4096):
+        block = world[f : f + 4096]
+        finite = np.isfinite(block)
+        if not (finite.all() or np.all(finite.any(axis=(1, 2)) == finite.all(axis=(1, 2)))):
+            raise ValueError("world_points contain NaN or infinite values (only whole frames may be NaN: dropped)")
+        if np.isinf(block).any():
+            raise ValueError("world_points contain infinite values")
     if not (np.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a positive number, got {fps}")
     n = world.shape[1]
@@ -75,6 +86,8 @@ def stabilize(
     rest: np.ndarray | None = None,
     weights: np.ndarray | None = None,
     *,
+    prior: RigidModel | None = None,
+    valid: np.ndarray | None = None,
     init: str = "icp",
     three_point: tuple[int, int, int] | None = None,
     schedule: Schedule | None = None,
@@ -92,12 +105,21 @@ def stabilize(
     backend "opencl", "numpy" or "auto": OpenCL where a device builds the kernels) or
     "reference" (PyTorch autograd + torch.optim.LBFGS, the paper's formulation).
     rest: (N, 3) rest mesh in skull space; None estimates it from the data (per-vertex
-    median of the initially aligned frames, moved to the nearest mode at the finest
-    width, facedyn.stabilize.rest), in the skull space of frame ``reference_frame``.
-    weights: (N,) per-vertex weights (0 excludes a vertex, e.g. a rigid-region mask).
+    mode of the aligned frames, facedyn.stabilize.rest); baselines use frame
+    ``reference_frame`` instead.
+    weights: (N,) per-vertex weights (0 excludes a vertex, e.g. a rigid-region mask);
+    None with no rest (a plain capture) or with a prior: mode pursuit discovers them from
+    the data (facedyn.stabilize.rigidity); otherwise every vertex counts.
+    prior: a RigidModel found on the actor's other takes (``result.model``, merged): the
+    take is solved in its skull frame (its rest), on the vertices rigid there and here.
+    valid: (F,) bool, False on frames the tracker dropped; frames that are all NaN or an
+    exact repeat of the frame before count as dropped too. They are bridged by
+    interpolation (facedyn.stabilize.dropped); their skull points stay what came in.
     init: mode pursuit's initialization: "identity", "three-point", "procrustes", "icp".
     three_point: vertex indices for three-point alignment (method or init).
-    schedule: widths, iterations per stage, spline levels (facedyn.stabilize.schedule).
+    schedule: widths, iterations per stage, spline levels (facedyn.stabilize.schedule);
+    None: ``Schedule.locked()`` when the weights were discovered or came with a prior,
+    the paper's full continuation ``Schedule()`` otherwise.
     chunk_frames, chunk_overlap: takes longer than chunk_frames are solved in
     overlapping chunks with bounded memory, blended in the overlaps.
     """
@@ -108,14 +130,30 @@ def stabilize(
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     if init not in baselines.METHODS:
         raise ValueError(f"init must be one of {baselines.METHODS}, got {init!r}")
-    world, rest, weights = _check_inputs(world_points, fps, rest, weights)
-    frames, n, _ = world.shape
+    captured, rest, weights = _check_inputs(world_points, fps, rest, weights)
+    frames, n, _ = captured.shape
     if not -frames <= reference_frame < frames:
         raise ValueError(f"reference_frame {reference_frame} out of range for {frames} frames")
-    schedule = schedule if schedule is not None else Schedule()
+    if prior is not None and prior.weights.shape != (n,):
+        raise ValueError(f"the prior rigid model has {len(prior.weights)} vertices, the take {n}")
+    tracked = tracked_frames(captured, valid)
+    world = bridge_dropped(captured, tracked)
+    timings: dict[str, float] = {}
+
+    t0 = time.perf_counter()
+    model = None
+    if method == "mode-pursuit" and weights is None and (rest is None or prior is not None):
+        model = estimate_rigidity(world, prior)
+        weights = model.weights
+        rest = model.rest if rest is None else rest
+    elif prior is not None:
+        weights = prior.weights if weights is None else weights
+        rest = prior.rest if rest is None else rest
+    timings["rigidity"] = time.perf_counter() - t0
+    if schedule is None:
+        schedule = Schedule.locked() if model is not None or prior is not None else Schedule()
     active = np.arange(n) if weights is None else np.flatnonzero(weights > 0)
     target = rest if rest is not None else world[reference_frame].astype(np.float64)
-    timings: dict[str, float] = {}
 
     t0 = time.perf_counter()
     if method == "mode-pursuit":
@@ -128,7 +166,8 @@ def stabilize(
     timings["init"] = time.perf_counter() - t0
     if method != "mode-pursuit":
         world_to_skull = dualquat.from_translate_orient(trans, quaternion.from_matrix(rot))
-        result = _finish(world, world_to_skull, target, active, method, None, timings)
+        result = _finish(captured, world_to_skull, target, active, method, None, timings)
+        result.tracked = tracked
         result.timings["total"] = time.perf_counter() - t_total
         return result
 
@@ -157,7 +196,11 @@ def stabilize(
         chunk_overlap,
     )
     timings.update(out.timings)
-    result = _finish(world, out.world_to_skull, rest, active, method, solver, timings)
+    result = _finish(captured, out.world_to_skull, rest, active, method, solver, timings)
+    final_weights = np.ones(n) if weights is None else weights
+    spread = model.spread if model is not None else np.zeros(n)
+    result.model = RigidModel(final_weights, rest, spread, model.noise_cm if model is not None else 0.0)
+    result.tracked = tracked
     result.energy = out.energy
     result.backend = getattr(stage_solver, "used_backend", None)
     result.history = out.history

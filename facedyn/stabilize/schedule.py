@@ -58,6 +58,18 @@ class Schedule:
         if not 0 <= self.refinements < len(self.widths_pos):
             raise ValueError(f"refinements must be in [0, {len(self.widths_pos) - 1}], got {self.refinements}")
 
+    @classmethod
+    def locked(cls, iterations: int = 12, reference_fps: float = REFERENCE_FPS) -> "Schedule":
+        """The schedule once the initial alignment is locked on the rigid mode (rigidity
+        discovered, or an actor's prior): no coarse widths or coarse splines to find the
+        mode again, only the three finest widths on the final spline, whose knots every
+        1/40 s smooth the tracking noise out of the skull's accelerations (the networks'
+        input) and still follow real mocap head turns (benchmarks/bench_stabilize_accuracy.py).
+        Starting over from 0.8 cm and a 4x coarser spline there moved the solve away from
+        the alignment it started from and left 3-4x the error after 12 iterations a stage."""
+        return cls(widths_pos=(0.2, 0.1, 0.05), widths_vel=(0.05, 0.025, 0.0125), reference_fps=reference_fps,
+                   iterations=iterations, knot_spacing=1.0 / 40.0, refinements=0)
+
     def stages(self) -> list[Stage]:
         return [
             Stage(k, float(wp), float(wv) * self.reference_fps, 1 <= k <= self.refinements)

@@ -89,3 +89,14 @@ def test_models_refuse_takes_in_another_skull_frame(rig_and_takes, tmp_path, cap
         check_skull_frame(tmp_path / "take.usda", plain.with_changes(rest_points=None), "f.removal", Model())
     check_skull_frame(tmp_path / "take.usda", plain.with_changes(rest_points=rig.neutral), "f.removal", Model())
     assert cli("stabilize", tmp_path / "take.usda", "-o", tmp_path / "s2.usdc", "--actor", tmp_path / "none.usda") == 1
+
+
+def test_actor_from_takes_finds_the_rigid_region_and_one_frame(rig_and_takes, tmp_path):
+    _, rig, _, caches = rig_and_takes
+    assert cli("actor", caches["walk"][0], caches["hop"][0], "--from", "takes", "-o", tmp_path / "actor.usda") == 0
+    actor = read_actor(tmp_path / "actor.usda")
+    assert actor.source == "takes" and actor.rigid_weights is not None
+    found_rigid = actor.rigid_weights >= 0.99
+    truly_rigid = rig.rigid_weights >= 0.99
+    # most of what it calls rigid is rigid, and it finds a good share of the truly rigid vertices
+    assert np.mean(truly_rigid[found_rigid]) > 0.8 and np.mean(found_rigid[truly_rigid]) > 0.3

@@ -1,0 +1,142 @@
+"""Stabilization of plain captures: rigidity discovered from the data, tracker errors,
+dropped frames, and an actor's prior (facedyn.stabilize.rigidity, dropped, api)."""
+import numpy as np
+import pytest
+
+from facedyn.evaluation import implied_skull_transforms, skull_frame_disagreement, stabilization_errors
+from facedyn.sim.corpus import TakeSpec, simulate_take
+from facedyn.sim.default_face import default_face
+from facedyn.sim.noise import TrackerNoise, add_tracker_noise
+from facedyn.stabilize import stabilize
+from facedyn.stabilize.dropped import bridge_dropped, tracked_frames
+from facedyn.stabilize.rigidity import RigidModel, estimate_rigidity
+
+TRACKER = TrackerNoise(iid_cm=0.01, temporal_cm=0.004, spatial_cm=0.002)
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return default_face()
+
+
+def capture(rig, spec, noise=TRACKER):
+    """A simulated take's truth and its tracked points with the tracker's errors."""
+    take = simulate_take(rig, spec)
+    tracked = add_tracker_noise(take.world_points(), spec.fps, noise, rig.neutral, seed=spec.seed)
+    return take, tracked
+
+
+@pytest.fixture(scope="module")
+def talking(rig):
+    """Speech-like expressions (jaw, smile, pucker changing) under walking, 2 s at 120 fps."""
+    spec = TakeSpec("talk", "walk", "jaw_open", duration_s=2.0, seed=3)
+    take = simulate_take(rig, spec)
+    # make the expression change all the time, not only ease in: replay the held jaw as a 2 Hz open-close
+    phase = 0.5 - 0.5 * np.cos(2 * np.pi * 2.0 * np.arange(len(take.frames)) / spec.fps)
+    neutral = rig.neutral[None]
+    take.quasistatic = (neutral + phase[:, None, None] * (take.quasistatic - neutral)).astype(np.float32)
+    take.captured = take.quasistatic + take.offsets
+    tracked = add_tracker_noise(take.world_points(), spec.fps, TRACKER, rig.neutral, seed=4)
+    return take, tracked
+
+
+def errors(rig, take, result):
+    return stabilization_errors(result.translate, result.orient, take.skull_translate, take.skull_orient,
+                                take.quasistatic + take.offsets, rig.face_vertices)
+
+
+def test_discovered_weights_separate_bone_from_soft_tissue(rig, talking):
+    take, tracked = talking
+    model = estimate_rigidity(tracked.points)
+    bone, soft = rig.rigid_weights == 1, rig.rigid_weights < 0.5
+    assert model.weights[bone].mean() > 0.9
+    assert model.weights[soft].mean() < 0.02
+    assert model.noise_cm == pytest.approx(2.5 * np.sqrt(0.01**2 + 0.004**2 + 0.002**2), rel=0.3)  # 90 % of |3D normal|
+
+
+def test_no_mask_stabilization_beats_the_old_default_and_nears_the_oracle(rig, talking):
+    take, tracked = talking
+    world = tracked.points
+    discovered = errors(rig, take, stabilize(world, take.fps))
+    every_vertex = errors(rig, take, stabilize(world, take.fps, weights=np.ones(rig.point_count)))  # the old default
+    oracle = errors(rig, take, stabilize(world, take.fps, method="procrustes", rest=rig.neutral,
+                                          weights=(rig.rigid_weights == 1).astype(float)))
+    assert discovered["median_vertex_cm"] < 0.2 * every_vertex["median_vertex_cm"]
+    assert discovered["median_vertex_cm"] <= 1.5 * oracle["median_vertex_cm"]
+    assert discovered["mean_vertex_cm"] <= 1.5 * oracle["mean_vertex_cm"]
+
+
+def test_pops_and_dropped_frames_do_not_move_the_skull(rig):
+    spec = TakeSpec("smile", "walk", "smile", duration_s=1.5, seed=9)
+    clean_take, clean = capture(rig, spec)
+    _, rough = capture(rig, spec, TrackerNoise(iid_cm=0.01, temporal_cm=0.004, spatial_cm=0.002,
+                                               pop_rate=4.0, pop_cm=0.5, drop_rate=0.03))
+    assert rough.popped.any() and (~rough.valid).sum() == 5
+    base = errors(rig, clean_take, stabilize(clean.points, spec.fps))
+    result = stabilize(rough.points, spec.fps)
+    np.testing.assert_array_equal(result.tracked, rough.valid)  # repeated frames found on their own
+    hit = errors(rig, clean_take, result)
+    assert hit["median_vertex_cm"] < 1.5 * base["median_vertex_cm"] + 5e-4
+    assert hit["max_rotation_deg"] < 0.1
+
+
+def test_nan_frames_count_as_dropped_but_partial_nan_is_an_error(rig):
+    f = np.arange(8.0)[:, None, None]
+    coefficients = np.random.default_rng(0).normal(size=(4, 10, 3))
+    world = sum(c * f**k for k, c in enumerate(coefficients))  # cubic in time: bridged exactly
+    holes = world.copy()
+    holes[3] = np.nan
+    tracked = tracked_frames(holes, np.array([1, 1, 1, 1, 1, 0, 1, 1], bool))
+    np.testing.assert_array_equal(tracked, [1, 1, 1, 0, 1, 0, 1, 1])
+    np.testing.assert_allclose(bridge_dropped(holes, tracked), world, atol=1e-9)
+    bad = world.copy()
+    bad[3, 4, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        stabilize(bad, 120.0)
+
+
+def test_a_prior_puts_two_takes_in_one_skull_frame(rig):
+    first, tracked_first = capture(rig, TakeSpec("brows", "walk", "brow_raise", duration_s=1.0, seed=21))
+    actor = stabilize(tracked_first.points, 120.0).model
+    frames, alone = [], []
+    for seed, motion in ((22, "walk"), (23, "run")):
+        take, tracked = capture(rig, TakeSpec(f"smile_{motion}", motion, "smile", duration_s=1.0, seed=seed))
+        result = stabilize(tracked.points, take.fps, prior=actor)
+        np.testing.assert_allclose(result.rest, actor.rest)  # solved in the actor's skull frame
+        assert np.all(result.model.weights <= actor.weights)
+        frames.append(implied_skull_transforms(result.translate, result.orient, take.skull_translate,
+                                               take.skull_orient, take.quasistatic + take.offsets, rig.face_vertices)[2])
+        alone.append(stabilize(tracked.points, take.fps).rest)
+    assert skull_frame_disagreement(frames[0], frames[1], rig.neutral[rig.face_vertices]) <= 0.005
+    # without the prior each take has its own frame (near its own first frame's pose)
+    assert np.median(np.linalg.norm(alone[0] - alone[1], axis=1)) > 0.05
+
+
+def test_rigid_models_merge_and_check_their_shapes():
+    n = 5
+    a = RigidModel(np.ones(n), np.zeros((n, 3)), np.full(n, 0.02), 0.02)
+    b = RigidModel(np.array([1, 1, 1, 0, 0.5]), np.ones((n, 3)), np.full(n, 0.03), 0.03)
+    merged = a.merge(b)
+    np.testing.assert_allclose(merged.weights, [1, 1, 1, 0, 0.5])
+    np.testing.assert_allclose(merged.rest, 0.5)
+    assert merged.takes == 2 and merged.noise_cm == 0.03
+    with pytest.raises(ValueError, match="weights"):
+        RigidModel(np.full(n, 2.0), np.zeros((n, 3)), np.zeros(n), 0.0)
+    with pytest.raises(ValueError, match="prior rigid model has 5 vertices"):
+        stabilize(np.zeros((4, 7, 3)), 120.0, prior=a)
+
+
+def test_tracker_noise_components_are_seeded_and_shaped(rig):
+    points = np.repeat(rig.neutral[None], 240, axis=0)
+    noise = TrackerNoise(temporal_cm=0.01, correlation_s=0.25)
+    out = add_tracker_noise(points, 120.0, noise, rig.neutral, seed=1).points - points
+    assert out.std() == pytest.approx(0.01, rel=0.1)
+    lag = np.corrcoef(out[:-12].ravel(), out[12:].ravel())[0, 1]  # 0.1 s apart: still correlated
+    assert lag > 0.8
+    spatial = add_tracker_noise(points, 120.0, TrackerNoise(spatial_cm=0.01), rig.neutral, seed=1).points - points
+    near = np.argsort(np.linalg.norm(rig.neutral - rig.neutral[0], axis=1))[1]
+    assert np.corrcoef(spatial[:, 0].ravel(), spatial[:, near].ravel())[0, 1] > 0.8
+    again = add_tracker_noise(points, 120.0, noise, rig.neutral, seed=1).points - points
+    np.testing.assert_array_equal(out, again)
+    with pytest.raises(ValueError, match="drop_mode"):
+        TrackerNoise(drop_mode="hold")
