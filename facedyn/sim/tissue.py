@@ -176,7 +176,7 @@ def simulate(
     it turns away from it). Float32 input gives float32 output.
     """
     params = TissueParams() if params is None else params
-    y, tri, translate, orient, weights, neutral = _validate(
+    y, tri, translate, orient, weights, neutral = validate_inputs(
         rest_shapes, triangles, skull_translate, skull_orient, fps, rigid_weights, neutral, noise_cm)
     frames, n = y.shape[:2]
     dtype = np.result_type(y.dtype, np.float32)
@@ -187,10 +187,10 @@ def simulate(
     sag = np.zeros((frames, n, 3), dtype=dtype)
     factorizations = 0
     if frames > 1 and free.size:
-        skull = _SkullMotion(translate, orient, fps, params.gravity_cm_s2)
+        skull = SkullMotion(translate, orient, fps, params.gravity_cm_s2)
         tissue = _Tissue(neutral, tri, free, hz[free], params, 1.0 / (fps * params.substeps))
         turned = skull.gravity_change(orient)
-        with _single_threaded_blas():
+        with single_threaded_blas():
             factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
             if np.any(turned):
                 sag[:, free] = tissue.gravity_sag(gain[:, free], turned)
@@ -200,7 +200,9 @@ def simulate(
     return SimulationResult(points.astype(dtype, copy=False), offsets, sag, gain, hz, factorizations)
 
 
-def _validate(rest_shapes, triangles, translate, orient, fps, weights, neutral, noise_cm):
+def validate_inputs(rest_shapes, triangles, translate, orient, fps, weights, neutral, noise_cm):
+    """`simulate`'s arguments checked and normalized (shared by every physics of facedyn.sim):
+    (y, int64 triangles, float64 translate, continuous orient, rigid weights, neutral)."""
     y = np.asarray(rest_shapes)
     if y.ndim != 3 or y.shape[2] != 3 or y.shape[0] < 1 or not np.issubdtype(y.dtype, np.floating):
         raise ValueError(f"rest_shapes must be (frames, points, 3) floats, got {y.shape} {y.dtype}")
@@ -278,7 +280,7 @@ def _stiffness_gain(y: np.ndarray, neutral: np.ndarray, tri: np.ndarray, stiffen
     return measured if new.all() else measured[np.cumsum(new) - 1]
 
 
-class _SkullMotion:
+class SkullMotion:
     """C2 interpolation of the sampled skull motion and its loads in skull axes.
 
     Translation and (sign-continuous) quaternion components are cubic splines, so the
@@ -469,7 +471,7 @@ class _Tissue:
                                                   -2 * du_w[j].imag * eye]) for j in range(2)], axis=1)
         return advance, predict
 
-    def run(self, y, gain, skull: _SkullMotion, fps: float, substeps: int, out: np.ndarray) -> int:
+    def run(self, y, gain, skull: SkullMotion, fps: float, substeps: int, out: np.ndarray) -> int:
         """Integrate from rest and write u of the free vertices into out (F, N, 3).
 
         Returns the number of factorizations. The gain drift is only measured on frames
@@ -534,7 +536,7 @@ class _Tissue:
 
 
 @contextmanager
-def _single_threaded_blas():
+def single_threaded_blas():
     """Run the block with OpenBLAS on one thread (in this thread only), then restore.
 
     Every BLAS call of a step (SuperLU's supernodes, the small dense products) is far too
