@@ -49,6 +49,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from facedyn.geometry import mesh
+from facedyn.sim import layout
+from facedyn.sim.layout import smooth_layout
 from facedyn.sim.tissue import SkullMotion, single_threaded_blas, validate_inputs
 
 # A prism (three tetrahedra) thinner than this fraction of its ideal volume counts as folded.
@@ -204,19 +206,6 @@ def simulate(
     return VolumetricResult(points.astype(dtype, copy=False), offsets, sag, thickness, len(layer.elements), factorizations, iterations)
 
 
-def smooth_layout(points: np.ndarray, seed: int, salt: int, waves: int = 8) -> np.ndarray:
-    """(N,) a smooth random field of unit RMS over `points` (cm): a sum of plane waves with
-    wavelengths 6-16 cm in random directions, so neighbouring tissue is alike and the face
-    varies over a few centimetres. Deterministic in (seed, salt)."""
-    rng = np.random.default_rng([int(seed), int(salt)])
-    direction = rng.normal(size=(waves, 3))
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    wavenumber = 2 * np.pi / rng.uniform(6.0, 16.0, waves)
-    phase = rng.uniform(0.0, 2 * np.pi, waves)
-    field = np.sin(points @ (direction * wavenumber[:, None]).T + phase).sum(axis=1)
-    return field / np.sqrt(waves / 2.0)
-
-
 class Layer:
     """The tetrahedral layer under the skin: nodes, elements, materials and the force model.
 
@@ -236,7 +225,7 @@ class Layer:
         normals = _vertex_normals(points, local)
         w = weights[self.vertices]
         depth = params.thickness_cm * (1.0 - w) + params.bone_thickness_cm * w
-        depth *= np.exp(params.thickness_variation * smooth_layout(points, params.layout_seed, 4))
+        depth *= np.exp(params.thickness_variation * smooth_layout(points, params.layout_seed, layout.DEPTH))
         self.elements, self.depth = _tetrahedralize(points, normals, local, depth, levels)
         self.offset = (np.arange(levels + 1) / levels)[:, None, None] * (self.depth[:, None] * normals)[None]  # (L+1, V, 3)
         node_count = (levels + 1) * columns
@@ -250,10 +239,10 @@ class Layer:
         self.skin = np.flatnonzero(~fixed[0])  # free skin nodes (level 0: node = column)
 
         centroid = points[self.elements % columns].mean(axis=1)
-        mu_l = params.shear_modulus * np.exp(params.stiffness_variation * smooth_layout(centroid, params.layout_seed, 1))
+        mu_l = params.shear_modulus * np.exp(params.stiffness_variation * smooth_layout(centroid, params.layout_seed, layout.STIFFNESS))
         lam_l = mu_l * 2 * params.poisson / (1 - 2 * params.poisson)
-        self.rho = params.density * np.exp(params.density_variation * smooth_layout(centroid, params.layout_seed, 2))
-        self.tau = params.viscosity_time * np.exp(params.damping_variation * smooth_layout(centroid, params.layout_seed, 3))
+        self.rho = params.density * np.exp(params.density_variation * smooth_layout(centroid, params.layout_seed, layout.DENSITY))
+        self.tau = params.viscosity_time * np.exp(params.damping_variation * smooth_layout(centroid, params.layout_seed, layout.DAMPING))
         self.lame = mu_l, lam_l
         # stable Neo-Hookean's parameters whose rest tangent is linear elasticity with (mu_l, lam_l)
         self.mu = 4.0 / 3.0 * mu_l
