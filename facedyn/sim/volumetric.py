@@ -152,6 +152,7 @@ class VolumetricResult:
     gravity_sag: np.ndarray  # (F, N, 3) static sag of the pose
     thickness: np.ndarray  # (N,) tissue depth under each skin vertex (0 where no layer)
     tetrahedra: int  # elements of the layer
+    torn: int  # elements left out because the expressions crush them (see Layer)
     factorizations: int
     iterations: int  # chord iterations, all steps together
 
@@ -189,7 +190,7 @@ def simulate(
     dtype = np.result_type(y.dtype, np.float32)
     offsets = np.zeros((frames, n, 3), dtype=dtype)
     sag = np.zeros((frames, n, 3), dtype=dtype)
-    layer = Layer(neutral, tri, weights, params)
+    layer = Layer(neutral, tri, weights, params, y)
     thickness = np.zeros(n)
     thickness[layer.vertices] = layer.depth
     factorizations = iterations = 0
@@ -203,7 +204,8 @@ def simulate(
     points = y + offsets
     if noise_cm > 0:
         points += np.random.default_rng(seed).normal(0.0, noise_cm, points.shape).astype(dtype)
-    return VolumetricResult(points.astype(dtype, copy=False), offsets, sag, thickness, len(layer.elements), factorizations, iterations)
+    return VolumetricResult(points.astype(dtype, copy=False), offsets, sag, thickness, len(layer.elements), layer.torn,
+                            factorizations, iterations)
 
 
 class Layer:
@@ -211,10 +213,16 @@ class Layer:
 
     Nodes come in columns, one per skin vertex of the layer (`vertices`), `layers` + 1 deep:
     node = level * V + column, level 0 on the skin, level `layers` on the skull. A node's
-    rest position is X(t) = y(t) - (level / layers) * depth * normal (neutral normals).
+    rest position is X(t) = y(t) - (level / layers) * depth * normal(y(t)).
+
+    Given the take's skin `rest_shapes`, elements that some frame's expression would crush
+    to under _MIN_QUALITY of their neutral volume (or invert: the built-in face's closed
+    mouth line, stretched six-fold by a wide-open jaw) are left out, a tear in the tissue
+    there; nodes left in no element are held.
     """
 
-    def __init__(self, neutral: np.ndarray, tri: np.ndarray, weights: np.ndarray, params: VolumetricParams):
+    def __init__(self, neutral: np.ndarray, tri: np.ndarray, weights: np.ndarray, params: VolumetricParams,
+                 rest_shapes: np.ndarray | None = None):
         held = weights >= 1.0
         used = tri[~np.all(held[tri], axis=1)]  # triangles with a free vertex
         self.vertices = np.unique(used)
@@ -222,16 +230,23 @@ class Layer:
         columns, levels = len(self.vertices), params.layers
         local = np.searchsorted(self.vertices, used)
         points = neutral[self.vertices]
-        normals = _vertex_normals(points, local)
+        self.triangles = local  # the skin's triangles over the layer's columns
+        self.outward = _outward_sign(points, local)
+        normals = self.normals(points[None])[0]
         w = weights[self.vertices]
         depth = params.thickness_cm * (1.0 - w) + params.bone_thickness_cm * w
         depth *= np.exp(params.thickness_variation * smooth_layout(points, params.layout_seed, layout.DEPTH))
         self.elements, self.depth = _tetrahedralize(points, normals, local, depth, levels)
-        self.offset = (np.arange(levels + 1) / levels)[:, None, None] * (self.depth[:, None] * normals)[None]  # (L+1, V, 3)
+        self.levels = (np.arange(levels + 1) / levels)[:, None, None]  # depth fraction of each level
         node_count = (levels + 1) * columns
         fixed = np.zeros((levels + 1, columns), dtype=bool)
         fixed[levels] = True
         fixed[0] = held[self.vertices]
+        self.torn = 0
+        if rest_shapes is not None:
+            intact = self._intact(neutral, rest_shapes)
+            self.elements, self.torn = self.elements[intact], int(np.count_nonzero(~intact))
+        fixed.ravel()[np.setdiff1d(np.arange(node_count), self.elements)] = True
         self.free = np.flatnonzero(~fixed.ravel())
         self.free_columns = self.free % columns  # the skin vertex above each free node
         self.dof = np.full(node_count, -1)
@@ -262,10 +277,36 @@ class Layer:
         self._scatter = sp.csr_matrix((signs, (rows, np.tile(np.arange(3 * e), 2))), shape=(node_count, 3 * e))
         self.damping = self.linear_stiffness(self.shape, self.volume, self.tau)
 
+    def _intact(self, neutral: np.ndarray, rest_shapes: np.ndarray, chunk: int = 64) -> np.ndarray:
+        """(E,) elements whose rest volume stays above _MIN_QUALITY of the neutral's in every
+        distinct frame of `rest_shapes`."""
+        corners = self.rest_positions(neutral[None, self.vertices].astype(np.float64))[0][self.elements]
+        neutral_volume = _signed_volumes(corners)
+        worst = np.full(len(self.elements), np.inf)
+        frames = len(rest_shapes)
+        for first in range(0, frames, chunk):
+            y = np.asarray(rest_shapes[first:first + chunk, self.vertices], dtype=np.float64)
+            changed = np.r_[True, np.any(y[1:] != y[:-1], axis=(1, 2))]
+            for frame in y[changed]:
+                rest = self.rest_positions(frame[None])[0]
+                worst = np.minimum(worst, _signed_volumes(rest[self.elements]) / neutral_volume)
+        return worst > _MIN_QUALITY
+
+    def normals(self, y_vertices: np.ndarray) -> np.ndarray:
+        """(F, V, 3) outward unit normals of the skin over the layer's columns (area-weighted)."""
+        tri = self.triangles
+        face = np.cross(y_vertices[:, tri[:, 1]] - y_vertices[:, tri[:, 0]], y_vertices[:, tri[:, 2]] - y_vertices[:, tri[:, 0]])
+        normals = np.zeros_like(y_vertices)
+        for k in range(3):
+            np.add.at(normals, (slice(None), tri[:, k]), face)
+        return self.outward * normals / np.maximum(np.linalg.norm(normals, axis=2, keepdims=True), 1e-300)
+
     def rest_positions(self, y_vertices: np.ndarray) -> np.ndarray:
-        """(F, nodes, 3) rest configuration X from the skin of the layer's vertices (F, V, 3)."""
-        levels = self.params.layers
-        return (y_vertices[:, None] - self.offset[None]).reshape(len(y_vertices), (levels + 1) * len(self.vertices), 3)
+        """(F, nodes, 3) rest configuration X from the skin of the layer's vertices (F, V, 3):
+        each column hangs `depth` along the skin's current normal, so it turns with the
+        skin (a jaw opening turns the columns under the chin instead of shearing them)."""
+        hanging = self.levels[None] * (self.depth[:, None] * self.normals(y_vertices))[:, None]  # (F, L+1, V, 3)
+        return (y_vertices[:, None] - hanging).reshape(len(y_vertices), -1, 3)
 
     def geometry(self, rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(inverse edge matrices (E, 3, 3), volumes (E,)) of the elements at rest positions."""
@@ -318,12 +359,15 @@ class Layer:
         out = np.zeros((frames, columns, 3))
         sag, previous, solver = np.zeros((len(self.free), 3)), np.zeros((len(self.free), 3)), None
         x = np.empty(((self.params.layers + 1) * columns, 3))
+        skin = None
         for f in range(frames):
             if not np.any(turned[f]):
                 sag[:], previous[:] = 0.0, 0.0
                 continue
-            rest = self.rest_positions(y[f:f + 1, self.vertices].astype(np.float64))[0]
-            shape, volume = self.geometry(rest)
+            if skin is None or np.any(y[f, self.vertices] != skin):  # held expressions keep their geometry
+                skin = y[f, self.vertices]
+                rest = self.rest_positions(skin[None].astype(np.float64))[0]
+                shape, volume = self.geometry(rest)
             if solver is None or _drift(solver[1], rest, self.elements) > self.params.refactor_strain:
                 solver = spla.splu(self.linear_stiffness(shape, volume), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                                    options={"SymmetricMode": True}), rest
@@ -342,17 +386,12 @@ class Layer:
         return out
 
 
-def _vertex_normals(points: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals, turned to point away from the layer's inside."""
+def _outward_sign(points: np.ndarray, tri: np.ndarray) -> float:
+    """+1 if the triangles' winding makes normals point outward, else -1: on a face (convex
+    towards the camera) the skin lies on the outward normal's side of its centroid."""
     face = np.cross(points[tri[:, 1]] - points[tri[:, 0]], points[tri[:, 2]] - points[tri[:, 0]])
-    normals = np.zeros_like(points)
-    for k in range(3):
-        np.add.at(normals, tri[:, k], face)
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    # outward: on a face (convex towards the camera) the skin lies on the normal's side of its centroid
-    if np.sum((points - points.mean(axis=0)) * normals) < 0:
-        normals = -normals
-    return normals
+    centroid = points[tri].mean(axis=1)
+    return -1.0 if np.sum((centroid - points.mean(axis=0)) * face) < 0 else 1.0
 
 
 def _tetrahedralize(points, normals, tri, depth, levels):
