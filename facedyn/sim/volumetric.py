@@ -42,7 +42,7 @@ response to that turn, so `dynamics` = offsets - sag is what motion adds.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
@@ -50,7 +50,6 @@ import scipy.sparse.linalg as spla
 
 from facedyn.geometry import mesh
 from facedyn.sim import layout
-from facedyn.sim.layout import smooth_layout
 from facedyn.sim.tissue import SkullMotion, single_threaded_blas, validate_inputs
 
 # A prism (three tetrahedra) thinner than this fraction of its ideal volume counts as folded.
@@ -235,7 +234,7 @@ class Layer:
         normals = self.normals(points[None])[0]
         w = weights[self.vertices]
         depth = params.thickness_cm * (1.0 - w) + params.bone_thickness_cm * w
-        depth *= np.exp(params.thickness_variation * smooth_layout(points, params.layout_seed, layout.DEPTH))
+        depth *= np.exp(params.thickness_variation * layout.smooth_layout(points, params.layout_seed, layout.DEPTH))
         self.elements, self.depth = _tetrahedralize(points, normals, local, depth, levels)
         self.levels = (np.arange(levels + 1) / levels)[:, None, None]  # depth fraction of each level
         node_count = (levels + 1) * columns
@@ -254,10 +253,10 @@ class Layer:
         self.skin = np.flatnonzero(~fixed[0])  # free skin nodes (level 0: node = column)
 
         centroid = points[self.elements % columns].mean(axis=1)
-        mu_l = params.shear_modulus * np.exp(params.stiffness_variation * smooth_layout(centroid, params.layout_seed, layout.STIFFNESS))
+        mu_l = params.shear_modulus * np.exp(params.stiffness_variation * layout.smooth_layout(centroid, params.layout_seed, layout.STIFFNESS))
         lam_l = mu_l * 2 * params.poisson / (1 - 2 * params.poisson)
-        self.rho = params.density * np.exp(params.density_variation * smooth_layout(centroid, params.layout_seed, layout.DENSITY))
-        self.tau = params.viscosity_time * np.exp(params.damping_variation * smooth_layout(centroid, params.layout_seed, layout.DAMPING))
+        self.rho = params.density * np.exp(params.density_variation * layout.smooth_layout(centroid, params.layout_seed, layout.DENSITY))
+        self.tau = params.viscosity_time * np.exp(params.damping_variation * layout.smooth_layout(centroid, params.layout_seed, layout.DAMPING))
         self.lame = mu_l, lam_l
         # stable Neo-Hookean's parameters whose rest tangent is linear elasticity with (mu_l, lam_l)
         self.mu = 4.0 / 3.0 * mu_l
@@ -325,6 +324,25 @@ class Layer:
         block = (mu_l * weight)[:, None, None, None, None] * (
             dot[:, :, None, :, None] * eye[None, None, :, None, :] + np.einsum("eai,ebj->ebiaj", grad, grad))
         block += (lam_l * weight)[:, None, None, None, None] * np.einsum("ebi,eaj->ebiaj", grad, grad)
+        return self._assemble(block.reshape(-1, 12, 12))
+
+    def tangent_stiffness(self, x: np.ndarray, shape: np.ndarray, volume: np.ndarray, eps: float = 1e-7) -> sp.csc_matrix:
+        """Free-free block of the elastic tangent at positions x (forward differences of each
+        element's gradient, all elements at once, symmetrized): for steps the rest tangent
+        is too far from (large strains, where the material stiffens)."""
+        corners = x[self.elements]
+        base = self._element_gradients(corners, shape, volume)
+        block = np.empty((len(corners), 4, 3, 4, 3))
+        for a in range(4):
+            for j in range(3):
+                moved = corners.copy()
+                moved[:, a, j] += eps
+                block[:, :, :, a, j] = (self._element_gradients(moved, shape, volume) - base) / eps
+        block = 0.5 * (block + block.transpose(0, 3, 4, 1, 2))
+        return self._assemble(block.reshape(-1, 12, 12))
+
+    def _assemble(self, block: np.ndarray) -> sp.csc_matrix:
+        """The free-free block of a matrix from per-element (E, 12, 12) blocks over the elements' dofs."""
         dofs = (3 * self.elements[:, :, None] + np.arange(3)).reshape(-1, 12)
         free_dof = np.full(3 * len(self.dof), -1)
         free_dof[3 * self.free[:, None] + np.arange(3)] = np.arange(3 * len(self.free)).reshape(-1, 3)
@@ -333,11 +351,19 @@ class Layer:
         cols = np.broadcast_to(local[:, None, :], (len(local), 12, 12))
         keep = (rows >= 0) & (cols >= 0)
         size = 3 * len(self.free)
-        return sp.csc_matrix((block.reshape(-1, 12, 12)[keep], (rows[keep], cols[keep])), shape=(size, size))
+        return sp.csc_matrix((block[keep], (rows[keep], cols[keep])), shape=(size, size))
 
     def forces(self, x: np.ndarray, shape: np.ndarray, volume: np.ndarray) -> np.ndarray:
         """(nodes, 3) elastic energy gradient at positions x for a rest geometry (shape, volume)."""
-        edges = x[self.elements[:, 1:]] - x[self.elements[:, :1]]
+        return self._scatter @ self._corner_gradients(x[self.elements[:, 1:]] - x[self.elements[:, :1]], shape, volume).reshape(-1, 3)
+
+    def _element_gradients(self, corners: np.ndarray, shape: np.ndarray, volume: np.ndarray) -> np.ndarray:
+        """(E, 4, 3) each element's energy gradient at its corners' positions (E, 4, 3)."""
+        nodal = self._corner_gradients(corners[:, 1:] - corners[:, :1], shape, volume)
+        return np.concatenate([-nodal.sum(axis=1, keepdims=True), nodal], axis=1)
+
+    def _corner_gradients(self, edges: np.ndarray, shape: np.ndarray, volume: np.ndarray) -> np.ndarray:
+        """(E, 3, 3) energy gradient at corners 1-3 (corner 0's is minus their sum) from the edges (E, 3, 3)."""
         f = np.matmul(edges.transpose(0, 2, 1), shape)  # deformation gradients (matmul: einsum is 5x slower here)
         c0, c1, c2 = f[:, :, 0], f[:, :, 1], f[:, :, 2]
         cof = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=2)
@@ -346,8 +372,7 @@ class Layer:
         stretch = ic - 3.0 - 2.0 * (j - 1.0)
         piola = (self.mu * (1.0 - 1.0 / (ic + 1.0)) + self.stiffening * stretch)[:, None, None] * f
         piola += (self.lam * (j - self.alpha) - self.stiffening * stretch)[:, None, None] * cof
-        nodal = np.matmul(shape, piola.transpose(0, 2, 1)) * volume[:, None, None]  # V sum_j P_ij shape_kj
-        return self._scatter @ nodal.reshape(-1, 3)
+        return np.matmul(shape, piola.transpose(0, 2, 1)) * volume[:, None, None]  # V sum_j P_ij shape_kj
 
     def gravity_sag(self, y: np.ndarray, turned: np.ndarray) -> np.ndarray:
         """(F, V, 3) static sag of the skin: forces(X + s) = M (g(t) - g(0)) on the free nodes.
@@ -369,8 +394,7 @@ class Layer:
                 rest = self.rest_positions(skin[None].astype(np.float64))[0]
                 shape, volume = self.geometry(rest)
             if solver is None or _drift(solver[1], rest, self.elements) > self.params.refactor_strain:
-                solver = spla.splu(self.linear_stiffness(shape, volume), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                                   options={"SymmetricMode": True}), rest
+                solver = _factorize_spd(self.linear_stiffness(shape, volume)), rest
             guess = 2.0 * sag - previous
             previous, sag = sag, guess
             load = self.mass[:, None] * turned[f]
@@ -470,6 +494,12 @@ def _convex_curvature(points: np.ndarray, normals: np.ndarray, edges: np.ndarray
     return curvature
 
 
+def _factorize_spd(matrix: sp.spmatrix):
+    """SuperLU of a symmetric positive definite matrix: symmetric mode keeps the fill (and
+    each solve) about half of the default's."""
+    return spla.splu(matrix.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+
+
 def _signed_volumes(tets: np.ndarray) -> np.ndarray:
     """(..., 4, 3) corner positions -> (...) signed volumes."""
     edges = tets[..., 1:, :] - tets[..., :1, :]
@@ -536,10 +566,8 @@ def _integrate(layer: Layer, y: np.ndarray, skull: SkullMotion, fps: float, para
         return (linear[step] - skin_accel[columns] - np.cross(alpha[step], r)
                 - 2.0 * np.cross(w, skin_velocity[columns] + v) - np.cross(w, np.cross(w, r)))
 
-    def factorize(shape_now, volume_now):
-        matrix = sp.diags(np.repeat(c1 * layer.mass, 3)) + c2 * layer.damping + layer.linear_stiffness(shape_now, volume_now)
-        # SPD: symmetric mode keeps the fill (and each solve) about half of the default's
-        return spla.splu(matrix.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+    def factorize(stiffness):
+        return _factorize_spd(sp.diags(np.repeat(c1 * layer.mass, 3)) + c2 * layer.damping + stiffness)
 
     skin, skin_velocity, skin_accel = motion.at(0)
     rest = layer.rest_positions(skin[None])[0]
@@ -548,7 +576,7 @@ def _integrate(layer: Layer, y: np.ndarray, skull: SkullMotion, fps: float, para
     v = np.zeros_like(u)
     a = load(0, skin_velocity, skin_accel, rest[free], v)
     x = rest.copy()
-    solver, reference, factorizations, iterations = factorize(shape, volume), rest, 1, 0
+    solver, reference, factorizations, iterations = factorize(layer.linear_stiffness(shape, volume)), rest, 1, 0
     for step in range(1, steps + 1):
         previous = skin
         skin, skin_velocity, skin_accel = motion.at(step)
@@ -556,7 +584,7 @@ def _integrate(layer: Layer, y: np.ndarray, skull: SkullMotion, fps: float, para
             rest = layer.rest_positions(skin[None])[0]
             shape, volume = layer.geometry(rest)
             if _drift(reference, rest, layer.elements) > params.refactor_strain:
-                solver, reference, factorizations = factorize(shape, volume), rest, factorizations + 1
+                solver, reference, factorizations = factorize(layer.linear_stiffness(shape, volume)), rest, factorizations + 1
         u_old, v_old, a_old = u, v, a
         u = u_old + h * v_old + 0.5 * h * h * a_old
         for attempt in range(2):
@@ -573,8 +601,10 @@ def _integrate(layer: Layer, y: np.ndarray, skull: SkullMotion, fps: float, para
                 if np.abs(du).max() <= params.tolerance_cm:
                     break
             else:
-                if attempt == 0:  # refactorize at the current rest shape and try once more
-                    solver, reference, factorizations = factorize(shape, volume), rest, factorizations + 1
+                if attempt == 0:  # refactorize with the tangent where the iterations got to, and try once more
+                    x[:] = rest
+                    x[free] += u
+                    solver, factorizations = factorize(layer.tangent_stiffness(x, shape, volume)), factorizations + 1
                     continue
                 raise ValueError(f"the volumetric tissue did not converge at frame {step // substeps}: "
                                  "skull accelerations or expression changes too large for the step (raise substeps)")
