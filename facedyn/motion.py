@@ -343,3 +343,32 @@ def _yaw_pitch_roll(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np.
     axes = np.eye(3)
     q = quaternion.multiply(quaternion.from_axis_angle(axes[1], yaw), quaternion.from_axis_angle(axes[0], pitch))
     return quaternion.multiply(q, quaternion.from_axis_angle(axes[2], roll))
+
+
+# Training-only motion sources (issue 18): more of what real mocap holds than walking,
+# running and hopping, set from general figures of each activity, not fitted to any
+# capture (the test takes' CMU subject 131 in particular). Each draws its tempo from `seed`.
+_DANCE = _Gait(step_hz=2.0, speed_cm_s=0.0, flight=0.0, bob_cm=3.0, surge_cm=1.5, sway_cm=4.0, pitch_deg=8.0, yaw_deg=6.0, roll_deg=5.0, look_deg=45.0)
+_TURN = _Gait(step_hz=1.6, speed_cm_s=40.0, flight=0.0, bob_cm=1.2, surge_cm=0.5, sway_cm=1.5, pitch_deg=2.0, yaw_deg=2.0, roll_deg=1.5, look_deg=170.0)
+_JUMP = _Gait(step_hz=1.0, speed_cm_s=20.0, flight=0.35, bob_cm=0.0, surge_cm=1.5, sway_cm=0.5, pitch_deg=6.0, yaw_deg=1.0, roll_deg=1.0, look_deg=30.0)
+
+
+def dance(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Dancing on the spot: a 3 cm bounce and 8 degree head nods on a 1.7-2.5 beats/s tempo,
+    4 cm sway at half the tempo, head turns within 45 degrees."""
+    tempo = float(np.random.default_rng([int(seed), 1]).uniform(1.7, 2.5))
+    return _gait(replace(_DANCE, step_hz=tempo), duration_s, fps, seed, ramp)
+
+
+def turn(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Slow steps while turning about: yaw swings of up to 170 degrees either way at up to
+    LOOK_MAX_DEG_S, 1.4-1.8 steps/s."""
+    steps = float(np.random.default_rng([int(seed), 2]).uniform(1.4, 1.8))
+    return _gait(replace(_TURN, step_hz=steps), duration_s, fps, seed, ramp)
+
+
+def jump(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, ramp: Ramp = Ramp()) -> SkullTrajectory:
+    """Repeated two-footed jumps: 0.9-1.2 jumps/s, a third of each in free fall, the head
+    travelling about 50-60 cm from the crouch to the top, accelerations up to about 1 g."""
+    rate = float(np.random.default_rng([int(seed), 3]).uniform(0.9, 1.2))
+    return _gait(replace(_JUMP, step_hz=rate), duration_s, fps, seed, ramp)

@@ -3,7 +3,7 @@
 `execute_step` is the Dask task. It never raises: what happened goes back as a result
 dict (status ok | skipped | failed | blocked, seconds, output, the one-line error), so one
 failing take never stops the others. The command runs in the worker process through
-`facedyn.cli.main`, with its output captured; a lock keeps two threads of one worker from
+`facedyn.processors.commandline.run_processor`, with its output captured; a lock keeps two threads of one worker from
 capturing each other's output (run workers with one thread each, as the local cluster does).
 """
 from __future__ import annotations
@@ -22,12 +22,12 @@ DONE = ("ok", "skipped")
 
 def run_cli(argv: tuple[str, ...]) -> tuple[int, str]:
     """(usdfacedyn's exit code, its last line on stderr: the one-line error when it failed)."""
-    from facedyn.cli import main
+    from facedyn.processors.commandline import run_processor
 
     out, err = io.StringIO(), io.StringIO()
     with _CAPTURE, redirect_stdout(out), redirect_stderr(err):
         try:
-            code = main(list(argv))
+            code = run_processor(list(argv))
         except SystemExit as exc:  # argparse's usage errors exit
             code = exc.code if isinstance(exc.code, int) else 1
     lines = [line for line in err.getvalue().splitlines() if line.strip()]

@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from facedyn.dynamics.samples import SAMPLE_COUNT, RIGID_THRESHOLD, check_landmarks, default_landmarks, face_region, farthest_point_samples
+from facedyn.dynamics.samples import (SAMPLE_COUNT, RIGID_THRESHOLD, check_landmarks, default_landmarks, face_region, farthest_point_samples,
+                                      skin_region)
 from facedyn.performance import Performance, Topology
 
 
@@ -52,10 +53,12 @@ class FaceSetup:
         samples=None,
         landmarks=None,
         sample_count: int = SAMPLE_COUNT,
+        uvs=None,
     ) -> "FaceSetup":
         """Fill what is not given: rigid vertices from rigid weights >= RIGID_THRESHOLD,
-        samples by farthest-point sampling of the face region (default: the non-rigid
-        vertices), landmarks from the rest mesh's bounding box."""
+        samples by farthest-point sampling of the face region's outer skin (default: the
+        non-rigid vertices; see samples.skin_region, which `uvs` lets keep off uv seams),
+        landmarks from the rest mesh's bounding box."""
         rest = np.asarray(rest_points, dtype=np.float64)
         n = len(rest)
         if rigid_vertices is None:
@@ -71,6 +74,7 @@ class FaceSetup:
             region = np.setdiff1d(face_region(n, face_vertices), rigid)
             if region.size == 0:
                 raise ValueError("every face vertex is rigid: no vertex is left for skin samples")
+            region = skin_region(rest, topology, uvs, region)
             samples = farthest_point_samples(rest, topology.triangles(), min(sample_count, len(region)), region)
         if landmarks is None:
             landmarks = default_landmarks(rest)
@@ -88,6 +92,7 @@ class FaceSetup:
             samples=performance.skin_samples,
             landmarks=performance.landmarks,
             sample_count=sample_count,
+            uvs=performance.uvs,
         )
 
     @property

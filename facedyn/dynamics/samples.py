@@ -6,6 +6,11 @@ Secondary dynamics are spatially smooth (papers/000 §5.1), so the network runs 
 farthest-point sampling with distances along the mesh's edges, so that samples do not
 jump across the open mouth or closed eyelids as straight-line distances would.
 
+Only the outer skin gets samples (`skin_region`): a rig may carry teeth, eyeballs or a
+mouth bag in the same mesh, and uv seams cut its face into charts; the stretch features
+(facedyn.dynamics.stretch) look STEP_CM either side of a sample within its uv chart, so
+samples keep that reach (and a margin) away from seams and open borders.
+
 The skull landmarks b_1..b_5 only need to be rigidly attached to the skull and spread in
 all three directions, so that any rotation moves some of them; when a take has none,
 they are placed from the rest mesh's bounding box (see `default_landmarks`).
@@ -13,12 +18,17 @@ they are placed from the rest mesh's bounding box (see `default_landmarks`).
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, dijkstra
 
-from facedyn.geometry.mesh_topology import edge_graph
+from facedyn.dynamics.stretch import STEP_CM, _corner_uv_indices
+from facedyn.geometry import mesh
+from facedyn.geometry.mesh_topology import edge_graph, graph_distance
+from facedyn.performance import Topology, UVs
 
 SAMPLE_COUNT = 344
 RIGID_THRESHOLD = 0.99
+BORDER_REACH_CM = 1.5 * STEP_CM  # samples stay this far (along the skin) from uv seams and open borders
+MIN_PIECE = 0.1  # pieces of skin left between seams smaller than this share of the largest get no samples
 
 # Default landmarks as fractions of the bounding box's half extents from its centre, in
 # skull space (Y up, the face looking along +Z, the subject's left towards +X).
@@ -53,6 +63,56 @@ def face_region(point_count: int, face_vertices=None, rigid_weights=None) -> np.
     if region.size == 0:
         raise ValueError("the face region is empty: no vertex to place skin samples on")
     return region
+
+
+def skin_region(points, topology: Topology, uvs: UVs | None = None, region=None, reach: float = BORDER_REACH_CM) -> np.ndarray:
+    """The vertices of `region` (default: all) fit for skin samples, sorted.
+
+    Keeps the mesh's connected piece that holds most of the region's area (the face: teeth,
+    eyeballs and other separate shells go), drops vertices within `reach` cm along the
+    skin of a uv seam (a vertex with two uv values) or an open border, then drops the
+    pieces this leaves that are smaller than MIN_PIECE of the largest (small uv islands:
+    nostrils, an inner mouth chart). Teeth or a mouth bag joined to the skin without a seam
+    cannot be told from skin by topology and stay in.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    tri = topology.triangles().astype(np.int64)
+    n = len(pts)
+    region = np.arange(n) if region is None else face_region(n, region)
+    inside = np.zeros(n, dtype=bool)
+    inside[region] = True
+    area = mesh.vertex_areas(pts, tri) if len(tri) else np.zeros(n)
+    graph = edge_graph(pts, tri)
+    _, piece = connected_components(graph, directed=False)
+    face = np.argmax(np.bincount(piece, weights=area * inside))
+    keep = inside & (piece == face)
+    border = np.union1d(_open_border_vertices(tri), _seam_vertices(topology, uvs))
+    if border.size:
+        keep &= ~(graph_distance(pts, tri, border, limit=reach) < reach)
+    kept = np.flatnonzero(keep)
+    if kept.size == 0:
+        raise ValueError(f"no vertex of the face region lies on the outer skin at least {reach} cm from a uv seam or border")
+    _, pieces = connected_components(graph[kept][:, kept], directed=False)
+    size = np.bincount(pieces, weights=area[kept])
+    return kept[size[pieces] >= MIN_PIECE * size.max()]
+
+
+def _open_border_vertices(tri: np.ndarray) -> np.ndarray:
+    """Vertices on an edge that only one triangle uses."""
+    edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    unique, count = np.unique(edges, axis=0, return_counts=True)
+    return np.unique(unique[count == 1])
+
+
+def _seam_vertices(topology: Topology, uvs: UVs | None) -> np.ndarray:
+    """Vertices whose corners carry more than one uv value (they sit on a chart's edge)."""
+    if uvs is None:
+        return np.zeros(0, np.int64)
+    fvi = np.asarray(topology.face_vertex_indices, dtype=np.int64)
+    values = np.asarray(uvs.values, dtype=np.float64)[_corner_uv_indices(fvi, uvs)]
+    pairs = np.unique(np.column_stack([fvi, values]), axis=0)
+    vertex, count = np.unique(pairs[:, 0].astype(np.int64), return_counts=True)
+    return vertex[count > 1]
 
 
 def farthest_point_samples(points, triangles, count: int = SAMPLE_COUNT, region=None) -> np.ndarray:

@@ -11,10 +11,14 @@ walking, running, hopping and a platform at 6..11 Hz, about 3 s at 120 fps; plus
 takes (Live Link curves): speech under real walking and hopping head motion (CMU), and at
 the standard scale six other performances (four speech, two range of motion) under every
 protocol motion.
+
+For training that learns the physics family rather than one model, `protocol` can give
+every take (or the whole corpus) a random actor's tissue, and add procedural dance, turn
+and jump takes; test corpora can use the other physics (facedyn.sim.volumetric).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -22,13 +26,19 @@ import numpy as np
 from facedyn.geometry import quaternion
 from facedyn import motion
 from facedyn.sim.rig import FaceRig
-from facedyn.sim.tissue import TissueParams, simulate
+from facedyn.sim import tissue as springs, volumetric
+from facedyn.sim.tissue import TissueParams
+from facedyn.sim.volumetric import VolumetricParams
 
 PLATFORM_HZ = (6, 7, 8, 9, 10, 11)
 SPEECH = "MySlate_3_Jason_Millers_iPhone.csv"  # Live Link speech of the dialog test takes
 # other Live Link performances, for training: four speech takes, two range-of-motion sessions
 PERFORMANCES = ("S07-001.csv", "S88-001.csv", "apfel.csv", "facial.csv", "alex_rom_3.csv", "alex_rom_4.csv")
 MOTIONS = ("still", "walk", "run", "hop") + tuple(f"platform:{hz}" for hz in PLATFORM_HZ)
+# procedural sources for training only (not tuned to the test takes' mocap): protocol(extra_motions=True)
+EXTRA_MOTIONS = ("dance", "turn", "jump")
+PHYSICS = {"tissue": TissueParams, "volumetric": VolumetricParams}  # protocol(physics=...) -> its parameters
+RANDOMIZE = ("take", "corpus")
 
 # Held expressions as shape-weight recipes, tried in order; a rig gets the first ten whose
 # shapes it has (ICT-FaceKit and the built-in face both use ARKit-style names).
@@ -55,7 +65,7 @@ class TakeSpec:
     """What to simulate: an expression source under a skull motion."""
 
     name: str
-    motion: str  # still | walk | run | hop | platform:HZ | bvh:PATH[#JOINT]
+    motion: str  # still | walk | run | hop | dance | turn | jump | platform:HZ | bvh:PATH[#JOINT]
     expression: str | None = None  # a HELD_EXPRESSIONS key, None = neutral
     dialog: str | None = None  # a Live Link Face CSV driving the expression instead
     duration_s: float = 3.0
@@ -63,6 +73,8 @@ class TakeSpec:
     seed: int = 0
     noise_cm: float = 0.0
     platform_amplitude_cm: float = motion.PLATFORM_AMPLITUDE_CM
+    # the take's own physics and actor (TissueParams or VolumetricParams); None: the corpus's
+    tissue: TissueParams | VolumetricParams | None = None
 
 
 @dataclass
@@ -91,7 +103,7 @@ def skull_motion(spec: TakeSpec) -> motion.SkullTrajectory:
     common = dict(duration_s=spec.duration_s, fps=spec.fps, seed=spec.seed)
     if kind == "still":
         return motion.still(**common)
-    if kind in ("walk", "run", "hop"):
+    if kind in ("walk", "run", "hop") + EXTRA_MOTIONS:
         return getattr(motion, kind)(**common)
     if kind == "platform":
         try:
@@ -102,7 +114,7 @@ def skull_motion(spec: TakeSpec) -> motion.SkullTrajectory:
     if kind == "bvh":
         path, _, joint = arg.partition("#")
         return motion.from_bvh(path, joint or "Head", duration_s=spec.duration_s, fps=spec.fps, seed=spec.seed)
-    raise ValueError(f"take {spec.name}: unknown motion {spec.motion!r}; use still, walk, run, hop, platform:HZ or bvh:PATH")
+    raise ValueError(f"take {spec.name}: unknown motion {spec.motion!r}; use still, walk, run, hop, dance, turn, jump, platform:HZ or bvh:PATH")
 
 
 def expression_weights(rig: FaceRig, spec: TakeSpec, frame_count: int) -> np.ndarray:
@@ -129,13 +141,17 @@ def expression_weights(rig: FaceRig, spec: TakeSpec, frame_count: int) -> np.nda
     return weights
 
 
-def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | None = None) -> SimulatedTake:
+def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | VolumetricParams | None = None) -> SimulatedTake:
+    """Simulate one take with its own physics (spec.tissue), else `tissue`, else the default
+    TissueParams; the parameters' type picks the physics (facedyn.sim.tissue or .volumetric)."""
     trajectory = skull_motion(spec)
     frame_count = trajectory.frame_count
     weights = expression_weights(rig, spec, frame_count)
     quasistatic = rig.evaluate(weights) if rig.expression_count else np.repeat(rig.neutral[None], frame_count, 0)
-    result = simulate(
-        quasistatic, rig.topology.triangles(), trajectory.translate, trajectory.orient, spec.fps, tissue,
+    params = spec.tissue or tissue or TissueParams()
+    physics = volumetric if isinstance(params, VolumetricParams) else springs
+    result = physics.simulate(
+        quasistatic, rig.topology.triangles(), trajectory.translate, trajectory.orient, spec.fps, params,
         noise_cm=spec.noise_cm, seed=spec.seed, rigid_weights=rig.rigid_weights, neutral=rig.neutral,
     )
     return SimulatedTake(
@@ -148,14 +164,15 @@ def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | None = No
         quasistatic=(quasistatic + result.gravity_sag).astype(np.float32),
         offsets=result.dynamics.astype(np.float32),
         weights=weights,
-        info={"motion": spec.motion, "expression": spec.expression, "dialog": spec.dialog and Path(spec.dialog).name},
+        info={"motion": spec.motion, "expression": spec.expression, "dialog": spec.dialog and Path(spec.dialog).name,
+              "physics": physics.__name__.rsplit(".", 1)[-1]},
     )
 
 
 _worker_setup: tuple = ()
 
 
-def _init_worker(rig: FaceRig, tissue: TissueParams | None) -> None:
+def _init_worker(rig: FaceRig, tissue: TissueParams | VolumetricParams | None) -> None:
     global _worker_setup
     _worker_setup = (rig, tissue)
 
@@ -165,7 +182,7 @@ def _simulate_in_worker(spec: TakeSpec) -> SimulatedTake:
     return simulate_take(rig, spec, tissue)
 
 
-def simulate_takes(rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | None = None, jobs: int = 1):
+def simulate_takes(rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | VolumetricParams | None = None, jobs: int = 1):
     """Simulated takes in the order of `specs`, `jobs` at a time in worker processes.
 
     One simulation is a sequential time loop on one core (single-threaded BLAS), so a
@@ -196,12 +213,40 @@ def protocol(
     data_dir: Path | None = None,
     seed: int = 0,
     noise_cm: float = 0.0,
+    *,
+    physics: str = "tissue",
+    randomize_tissue: str | None = None,
+    extra_motions: bool = False,
 ) -> list[TakeSpec]:
     """The capture protocol at a scale: 'standard' (the paper's) or 'demo' (a quick subset).
 
     Dialog takes need the Live Link curves and CMU mocap in `data_dir` (../shared/data);
     without it they use procedural walking and hopping and stay out when no curves exist.
+    `physics` ('tissue' or 'volumetric') and `randomize_tissue` set each take's physics:
+    None keeps the corpus's (TissueParams() unless the caller passes one; 'volumetric'
+    gives every take VolumetricParams()), 'corpus' draws one random actor from `seed`,
+    'take' one per take from the take's seed, so a corpus is the same whatever the number
+    of workers. `extra_motions` adds the held expressions under EXTRA_MOTIONS (dance,
+    turn, jump), training sources not tuned to the test takes' mocap.
     """
+    if physics not in PHYSICS:
+        raise ValueError(f"physics must be one of {', '.join(PHYSICS)}, got {physics!r}")
+    if randomize_tissue not in (None,) + RANDOMIZE:
+        raise ValueError(f"randomize_tissue must be None, 'take' or 'corpus', got {randomize_tissue!r}")
+    specs = _protocol_takes(rig, scale, data_dir, seed, noise_cm, extra_motions)
+    params = PHYSICS[physics]
+    if randomize_tissue == "take":
+        return [replace(spec, tissue=params.random(spec.seed)) for spec in specs]
+    if randomize_tissue == "corpus":
+        actor = params.random(seed)
+        return [replace(spec, tissue=actor) for spec in specs]
+    if physics != "tissue":
+        return [replace(spec, tissue=params()) for spec in specs]
+    return specs
+
+
+def _protocol_takes(rig: FaceRig, scale: str, data_dir: Path | None, seed: int, noise_cm: float, extra_motions: bool) -> list[TakeSpec]:
+    """The protocol's takes, before any physics is chosen."""
     if scale == "standard":
         expressions, motions, duration, dialog_s = held_expressions(rig, 10), MOTIONS, 3.0, 6.0
     elif scale == "demo":
@@ -211,7 +256,7 @@ def protocol(
     specs = []
     take_seed = seed
     for expression in [None] + expressions:
-        for kind in motions:
+        for kind in motions + (EXTRA_MOTIONS if extra_motions and expression else ()):
             take_seed += 1
             label = expression or "neutral"
             specs.append(TakeSpec(f"{label}_{motion_label(kind)}", kind, expression, duration_s=duration, seed=take_seed, noise_cm=noise_cm))

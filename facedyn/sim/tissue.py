@@ -55,6 +55,7 @@ import scipy.sparse.linalg as spla
 from scipy.interpolate import CubicSpline
 
 from facedyn.geometry import mesh, quaternion
+from facedyn.sim import layout
 
 
 def _gauss_legendre():
@@ -96,7 +97,8 @@ SAG_BLOCK = 32  # distinct expressions solved together for the gravity sag
 class TissueParams:
     """Physical and numerical constants of the tissue model (cm, s, Hz).
 
-    Only frequencies and lengths: the areal density cancels (every load is inertial).
+    Only frequencies and lengths: a uniform areal density cancels (every load is
+    inertial); its layout does not (heavier skin is held less by the membrane).
     The defaults give the paper's magnitudes: on the ICT face about 5 mm peak offsets on
     an 11 Hz platform of 2 mm amplitude and about 2 mm when walking (0.4-0.5 g vertical
     head acceleration at 2 Hz); ring-downs lose 90 % within about 0.2 s.
@@ -110,6 +112,11 @@ class TissueParams:
     gravity_cm_s2: float = 981.0  # world gravity (-Y); 0 leaves gravity out
     substeps: int = 1  # Gauss-Legendre steps per output frame
     refactor_tolerance: float = 0.05  # relative change of the system's diagonal that refactorizes
+    # spatial layouts (facedyn.sim.layout): log-sd of the bone springs' stiffness and of the
+    # areal density over the face, drawn from layout_seed (0: uniform tissue)
+    stiffness_variation: float = 0.0
+    density_variation: float = 0.0
+    layout_seed: int = 0
 
     def __post_init__(self) -> None:
         for name in ("soft_hz", "bone_hz", "damping_ratio", "coupling_cm", "refactor_tolerance"):
@@ -118,21 +125,49 @@ class TissueParams:
                 raise ValueError(f"TissueParams.{name} must be positive, got {value}")
         if self.bone_hz < self.soft_hz:
             raise ValueError(f"TissueParams.bone_hz ({self.bone_hz}) must be >= soft_hz ({self.soft_hz})")
-        for name in ("strain_stiffening", "gravity_cm_s2"):
+        for name in ("strain_stiffening", "gravity_cm_s2", "stiffness_variation", "density_variation"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"TissueParams.{name} must be >= 0, got {value}")
         if int(self.substeps) != self.substeps or self.substeps < 1:
             raise ValueError(f"TissueParams.substeps must be a positive integer, got {self.substeps}")
 
+    @classmethod
+    def random(cls, seed: int, **overrides) -> "TissueParams":
+        """A training actor's tissue drawn from `seed`: soft_hz 5-9 Hz, bone_hz 30-50 Hz,
+        damping ratio 0.15-0.35, coupling 0.6-1.4 cm, strain stiffening 1-6, and spatial
+        layouts of stiffness (log-sd 0.05-0.3) and density (0-0.2). `overrides` replace
+        drawn fields (e.g. substeps)."""
+        rng = np.random.default_rng([int(seed), 0x746973])  # "tis": another stream than the volumetric draws
+        drawn = dict(
+            soft_hz=rng.uniform(5.0, 9.0), bone_hz=rng.uniform(30.0, 50.0), damping_ratio=rng.uniform(0.15, 0.35),
+            coupling_cm=rng.uniform(0.6, 1.4), strain_stiffening=rng.uniform(1.0, 6.0),
+            stiffness_variation=rng.uniform(0.05, 0.3), density_variation=rng.uniform(0.0, 0.2),
+        )
+        return cls(**{**{k: float(v) for k, v in drawn.items()}, "layout_seed": int(seed), **overrides})
+
     def rayleigh(self) -> tuple[float, float]:
         """(a, b) of C = a M + b K_0 giving damping_ratio at soft_hz and at bone_hz."""
         w1, w2 = 2 * np.pi * self.soft_hz, 2 * np.pi * self.bone_hz
         return 2 * self.damping_ratio * w1 * w2 / (w1 + w2), 2 * self.damping_ratio / (w1 + w2)
 
-    def attachment_hz(self, rigid_weights: np.ndarray) -> np.ndarray:
-        """Per-vertex spring frequency, geometric from soft_hz (weight 0) to bone_hz (1)."""
-        return self.soft_hz * (self.bone_hz / self.soft_hz) ** np.asarray(rigid_weights, dtype=np.float64)
+    def attachment_hz(self, rigid_weights: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """Per-vertex spring frequency, geometric from soft_hz (weight 0) to bone_hz (1),
+        times the stiffness layout's factor at the neutral `points` (needed when it varies)."""
+        hz = self.soft_hz * (self.bone_hz / self.soft_hz) ** np.asarray(rigid_weights, dtype=np.float64)
+        return hz * np.sqrt(self._layout(points, "stiffness_variation", layout.STIFFNESS))
+
+    def density(self, points: np.ndarray) -> np.ndarray:
+        """(N,) relative areal density at the neutral points (1 without a density layout)."""
+        return self._layout(points, "density_variation", layout.DENSITY)
+
+    def _layout(self, points, field: str, salt: int) -> np.ndarray | float:
+        variation = getattr(self, field)
+        if variation == 0:
+            return 1.0
+        if points is None:
+            raise ValueError(f"TissueParams.{field} > 0 needs the neutral points to lay the tissue out over")
+        return np.exp(variation * layout.smooth_layout(points, self.layout_seed, salt))
 
 
 @dataclass
@@ -176,21 +211,21 @@ def simulate(
     it turns away from it). Float32 input gives float32 output.
     """
     params = TissueParams() if params is None else params
-    y, tri, translate, orient, weights, neutral = _validate(
+    y, tri, translate, orient, weights, neutral = validate_inputs(
         rest_shapes, triangles, skull_translate, skull_orient, fps, rigid_weights, neutral, noise_cm)
     frames, n = y.shape[:2]
     dtype = np.result_type(y.dtype, np.float32)
     free = np.flatnonzero(weights < 1.0)
     gain = _stiffness_gain(y, neutral, tri, params.strain_stiffening)
-    hz = params.attachment_hz(weights)
+    hz = params.attachment_hz(weights, neutral)
     offsets = np.zeros((frames, n, 3), dtype=dtype)
     sag = np.zeros((frames, n, 3), dtype=dtype)
     factorizations = 0
     if frames > 1 and free.size:
-        skull = _SkullMotion(translate, orient, fps, params.gravity_cm_s2)
+        skull = SkullMotion(translate, orient, fps, params.gravity_cm_s2)
         tissue = _Tissue(neutral, tri, free, hz[free], params, 1.0 / (fps * params.substeps))
         turned = skull.gravity_change(orient)
-        with _single_threaded_blas():
+        with single_threaded_blas():
             factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
             if np.any(turned):
                 sag[:, free] = tissue.gravity_sag(gain[:, free], turned)
@@ -200,7 +235,9 @@ def simulate(
     return SimulationResult(points.astype(dtype, copy=False), offsets, sag, gain, hz, factorizations)
 
 
-def _validate(rest_shapes, triangles, translate, orient, fps, weights, neutral, noise_cm):
+def validate_inputs(rest_shapes, triangles, translate, orient, fps, weights, neutral, noise_cm):
+    """`simulate`'s arguments checked and normalized (shared by every physics of facedyn.sim):
+    (y, int64 triangles, float64 translate, continuous orient, rigid weights, neutral)."""
     y = np.asarray(rest_shapes)
     if y.ndim != 3 or y.shape[2] != 3 or y.shape[0] < 1 or not np.issubdtype(y.dtype, np.floating):
         raise ValueError(f"rest_shapes must be (frames, points, 3) floats, got {y.shape} {y.dtype}")
@@ -278,7 +315,7 @@ def _stiffness_gain(y: np.ndarray, neutral: np.ndarray, tri: np.ndarray, stiffen
     return measured if new.all() else measured[np.cumsum(new) - 1]
 
 
-class _SkullMotion:
+class SkullMotion:
     """C2 interpolation of the sampled skull motion and its loads in skull axes.
 
     Translation and (sign-continuous) quaternion components are cubic splines, so the
@@ -338,7 +375,7 @@ class _Tissue:
         n = len(neutral)
         mass = mesh.vertex_areas(neutral, tri)
         # Vertices in no triangle have no area; give them a small one so they still move.
-        mass = np.maximum(mass, 1e-3 * mass[mass > 0].mean() if np.any(mass > 0) else 1.0)
+        mass = np.maximum(mass, 1e-3 * mass[mass > 0].mean() if np.any(mass > 0) else 1.0) * params.density(neutral)
         lap = mesh.cotangent_laplacian(neutral, tri, nonnegative=True)
         if len(free) < n:
             lap = lap[free][:, free]  # held neighbours have u = 0: only their diagonal pull stays
@@ -469,7 +506,7 @@ class _Tissue:
                                                   -2 * du_w[j].imag * eye]) for j in range(2)], axis=1)
         return advance, predict
 
-    def run(self, y, gain, skull: _SkullMotion, fps: float, substeps: int, out: np.ndarray) -> int:
+    def run(self, y, gain, skull: SkullMotion, fps: float, substeps: int, out: np.ndarray) -> int:
         """Integrate from rest and write u of the free vertices into out (F, N, 3).
 
         Returns the number of factorizations. The gain drift is only measured on frames
@@ -534,7 +571,7 @@ class _Tissue:
 
 
 @contextmanager
-def _single_threaded_blas():
+def single_threaded_blas():
     """Run the block with OpenBLAS on one thread (in this thread only), then restore.
 
     Every BLAS call of a step (SuperLU's supernodes, the small dense products) is far too

@@ -240,13 +240,3 @@ def write_take_root(root: Path, sublayers: list[Path], timing: Timing) -> Path:
     layer.subLayerPaths = [relative_asset_path(p, root.parent) for p in sublayers]
     export_atomically(layer, root)
     return root
-
-
-def attach(root: Path, layer_path: Path) -> list[str]:
-    """rootedit.attach for callers that want only the new subLayers (the runner, until it reports more)."""
-    from facedyn.usd.rootedit import attach as attach_by_role  # rootedit builds on this module
-
-    return attach_by_role(root, layer_path).sublayers
-
-
-attach_weakest = attach  # a captured layer is placed weakest by its role

@@ -1,6 +1,14 @@
-"""The capture protocol's take list (papers/000 §4 and §7.1)."""
-from facedyn.sim.corpus import MOTIONS, PERFORMANCES, SPEECH, expression_weights, protocol
+"""The capture protocol's take list (papers/000 §4 and §7.1), randomized tissue and extra motions."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from facedyn.sim.corpus import (EXTRA_MOTIONS, MOTIONS, PERFORMANCES, SPEECH, TakeSpec, expression_weights, protocol, simulate_take,
+                                simulate_takes, skull_motion)
 from facedyn.sim.default_face import default_face
+from facedyn.sim.tissue import TissueParams
+from facedyn.sim.volumetric import VolumetricParams
 
 
 def test_standard_protocol_captures_every_performance_under_every_motion(shared_data):
@@ -25,3 +33,70 @@ def test_performances_move_the_face_and_stay_out_of_the_demo_and_of_data_free_pr
     performance = next(s for s in protocol(rig, "standard", shared_data) if s.dialog and not s.dialog.endswith(SPEECH))
     weights = expression_weights(rig, performance, 360)
     assert weights.std(axis=0).max() > 0.05  # the expression changes over the take
+
+
+def small_face():
+    return default_face(resolution=10)
+
+
+def test_randomized_tissue_is_drawn_per_take_or_per_corpus_from_the_seeds():
+    rig = small_face()
+    per_take = protocol(rig, "demo", seed=5, randomize_tissue="take")
+    assert all(isinstance(s.tissue, TissueParams) for s in per_take)
+    assert len({s.tissue for s in per_take}) == len(per_take)  # every take its own actor
+    assert per_take == protocol(rig, "demo", seed=5, randomize_tissue="take")  # seeded: the same list again
+    assert per_take[0].tissue != protocol(rig, "demo", seed=6, randomize_tissue="take")[0].tissue
+    corpus = protocol(rig, "demo", seed=5, randomize_tissue="corpus", physics="volumetric")
+    assert len({s.tissue for s in corpus}) == 1 and isinstance(corpus[0].tissue, VolumetricParams)
+    assert all(isinstance(s.tissue, VolumetricParams) for s in protocol(rig, "demo", physics="volumetric"))
+    assert all(s.tissue is None for s in protocol(rig, "demo"))  # the corpus's physics, as before
+    with pytest.raises(ValueError, match="randomize_tissue"):
+        protocol(rig, "demo", randomize_tissue="actor")
+    with pytest.raises(ValueError, match="physics"):
+        protocol(rig, "demo", physics="fem")
+
+
+def test_a_randomized_corpus_is_the_same_whatever_the_number_of_workers():
+    rig = small_face()
+    specs = [replace(s, duration_s=0.25) for s in protocol(rig, "demo", seed=2, randomize_tissue="take") if s.motion in ("walk", "hop")][:2]
+    alone = list(simulate_takes(rig, specs, jobs=1))
+    pooled = list(simulate_takes(rig, specs, jobs=2))
+    for a, b in zip(alone, pooled):
+        assert np.array_equal(a.offsets, b.offsets) and np.array_equal(a.captured, b.captured)
+    assert np.abs(alone[0].offsets).max() > 0
+    default = simulate_take(rig, replace(specs[0], tissue=None))
+    assert not np.allclose(default.offsets, alone[0].offsets)  # the random actor is another tissue
+
+
+def test_a_take_can_carry_the_other_physics():
+    rig = small_face()
+    spec = TakeSpec("walk", "walk", "jaw_open", duration_s=0.4, seed=3)
+    springs = simulate_take(rig, spec)
+    layer = simulate_take(rig, replace(spec, tissue=VolumetricParams.random(1)))
+    assert springs.info["physics"] == "tissue" and layer.info["physics"] == "volumetric"
+    assert np.abs(layer.offsets).max() > 1e-3
+    assert not np.allclose(layer.offsets, springs.offsets, atol=1e-3)
+
+
+def test_extra_motions_are_training_takes_of_held_expressions():
+    rig = small_face()
+    plain = protocol(rig, "demo")
+    extra = protocol(rig, "demo", extra_motions=True)
+    added = [s for s in extra if s.motion in EXTRA_MOTIONS]
+    assert len(extra) - len(plain) == len(added) == 3 * len(EXTRA_MOTIONS)
+    assert all(s.expression is not None and s.dialog is None for s in added)
+    assert len({s.name for s in extra}) == len(extra)
+    for kind in EXTRA_MOTIONS:
+        trajectory = skull_motion(TakeSpec(kind, kind, duration_s=2.0, seed=1))
+        assert trajectory.frame_count == 240 and np.ptp(trajectory.translate, axis=0).max() > 1.0
+
+
+def test_tissue_layouts_vary_the_springs_over_the_face():
+    rig = small_face()
+    params = TissueParams.random(4)
+    assert params == TissueParams.random(4) and 5 <= params.soft_hz <= 9 and params.stiffness_variation > 0
+    hz = params.attachment_hz(np.zeros(rig.point_count), rig.neutral)
+    assert hz.std() > 0.02 * hz.mean()  # not uniform: the stiffness layout
+    assert np.all(TissueParams().attachment_hz(np.zeros(3)) == TissueParams().soft_hz)
+    with pytest.raises(ValueError, match="neutral points"):
+        params.attachment_hz(np.zeros(3))

@@ -10,7 +10,8 @@ from facedyn.geometry import quaternion
 from facedyn.performance import UVs, Topology
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
-from facedyn.usd.layers import LayerContent, attach, write_layer, write_take_root
+from facedyn.usd.layers import LayerContent, write_layer, write_take_root
+from facedyn.usd.rootedit import attach
 from facedyn.usd.take import read_take
 from facedyn.usd.timing import Timing
 
@@ -69,7 +70,7 @@ def test_result_layer_composes_over_capture_and_reproduces_world_points(tmp_path
     )
     prov = schema.Provenance("stabilize", "test", {"method": "mode-pursuit", "path": Path("/x")}, (FRAMES[0], FRAMES[-1]), [str(capture)])
     stabilized = write_layer(tmp_path / "stabilized.usdc", content, timing, prov)
-    assert attach(root, stabilized) == ["./stabilized.usdc", "./capture.usdc"]
+    assert attach(root, stabilized).sublayers == ["./stabilized.usdc", "./capture.usdc"]
     perf, _ = read_take(root)
     assert perf.role == "stabilized"
     np.testing.assert_allclose(perf.world_points(), world, atol=1e-4)
