@@ -78,7 +78,10 @@ class StabilizeProcessor(Processor):
         from facedyn.usd.layers import LayerContent
 
         perf, source, params, weights, rest, three_point = plan.state
-        schedule = Schedule(iterations=params["iterations"], reference_fps=params["reference_fps"])
+        discovering = weights is None and rest is None and params["method"] == "mode-pursuit"
+        # A plain capture (no mask, no rest): the rigid mode is discovered first, then solved on the locked fine schedule.
+        make = Schedule.locked if discovering else Schedule
+        schedule = make(iterations=params["iterations"], reference_fps=params["reference_fps"])
         progress.start(f"stabilize ({params['method']})", 1)
         result = stabilize(
             perf.world_points(), perf.fps, method=params["method"], solver=params["solver"], rest=rest, weights=weights,
