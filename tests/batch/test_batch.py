@@ -21,7 +21,7 @@ from facedyn.batch.corpus import build_corpus_on  # noqa: E402
 from facedyn.batch.plan import Models, plan_batch  # noqa: E402
 from facedyn.batch.state import STATE_FILE, file_checksum  # noqa: E402
 from facedyn.dynamics.face import FaceSetup  # noqa: E402
-from facedyn.dynamics.modelfile import save_model  # noqa: E402
+from facedyn.dynamics.modelfile import load_model, save_model  # noqa: E402
 from facedyn.dynamics.synthesis import synthesis_config, train_synthesis  # noqa: E402
 from facedyn.dynamics.training import Take, TrainConfig, train_removal  # noqa: E402
 from facedyn.sim.corpus import TakeSpec, simulate_take  # noqa: E402
@@ -91,9 +91,9 @@ def test_a_batch_completes_and_a_rerun_skips_every_step(shots, client, tmp_path)
     again = run_steps(client, takes)
     assert set(statuses(again).values()) == {"skipped"}
     # a changed model makes its step and every later one stale, nothing before it
-    shutil.copy(shots / "actor.removal", tmp_path / "other.removal")
-    with open(tmp_path / "other.removal", "ab") as f:
-        f.write(b"\n")  # same model, other bytes: another checksum
+    model = load_model(shots / "actor.removal")
+    model.info["note"] = "re-saved"  # same network, other bytes: another checksum
+    save_model(model, tmp_path / "other.removal")
     other = plan_batch([str(shots / "shot0.usdc")], out, tuple(ALL_STEPS.split(",")),
                        Models(tmp_path / "other.removal", shots / "actor.synthesis", "hop"))
     changed = statuses(run_steps(client, other))
