@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.sparse.csgraph import connected_components
 
 from facedyn.geometry import mesh
 from facedyn.sim import layout
@@ -57,8 +58,10 @@ _MIN_QUALITY = 0.2
 _SHRINK = 0.8  # thickness factor per folding fix
 _CURVATURE_DEPTH = 0.5  # the depth stays under this fraction of the skin's convex radius of curvature
 _DEPTH_SLOPE = 0.5  # cm of depth per cm along the skin, at most
-_SHRINK_ROUNDS = 40
+_SHRINK_ROUNDS = 12
 _MAX_ITERATIONS = 30  # chord iterations per step before the step refactorizes
+_MIN_DEPTH = 0.25  # prisms thinner than this fraction of bone_thickness_cm are left out
+_SAG_SHIFT_HZ = 0.2  # mass shift of the static preconditioner, far below any tissue mode
 
 
 @dataclass(frozen=True)
@@ -235,7 +238,7 @@ class Layer:
         w = weights[self.vertices]
         depth = params.thickness_cm * (1.0 - w) + params.bone_thickness_cm * w
         depth *= np.exp(params.thickness_variation * layout.smooth_layout(points, params.layout_seed, layout.DEPTH))
-        self.elements, self.depth = _tetrahedralize(points, normals, local, depth, levels)
+        self.elements, self.depth = _tetrahedralize(points, normals, local, depth, levels, _MIN_DEPTH * params.bone_thickness_cm)
         self.levels = (np.arange(levels + 1) / levels)[:, None, None]  # depth fraction of each level
         node_count = (levels + 1) * columns
         fixed = np.zeros((levels + 1, columns), dtype=bool)
@@ -245,7 +248,7 @@ class Layer:
         if rest_shapes is not None:
             intact = self._intact(neutral, rest_shapes)
             self.elements, self.torn = self.elements[intact], int(np.count_nonzero(~intact))
-        fixed.ravel()[np.setdiff1d(np.arange(node_count), self.elements)] = True
+        fixed.ravel()[_floating_nodes(self.elements, fixed.ravel())] = True
         self.free = np.flatnonzero(~fixed.ravel())
         self.free_columns = self.free % columns  # the skin vertex above each free node
         self.dof = np.full(node_count, -1)
@@ -328,8 +331,9 @@ class Layer:
 
     def tangent_stiffness(self, x: np.ndarray, shape: np.ndarray, volume: np.ndarray, eps: float = 1e-7) -> sp.csc_matrix:
         """Free-free block of the elastic tangent at positions x (forward differences of each
-        element's gradient, all elements at once, symmetrized): for steps the rest tangent
-        is too far from (large strains, where the material stiffens)."""
+        element's gradient, all elements at once, symmetrized, each clamped to positive
+        semidefinite): for steps the rest tangent is too far from (large strains, where the
+        material stiffens)."""
         corners = x[self.elements]
         base = self._element_gradients(corners, shape, volume)
         block = np.empty((len(corners), 4, 3, 4, 3))
@@ -338,8 +342,12 @@ class Layer:
                 moved = corners.copy()
                 moved[:, a, j] += eps
                 block[:, :, :, a, j] = (self._element_gradients(moved, shape, volume) - base) / eps
-        block = 0.5 * (block + block.transpose(0, 3, 4, 1, 2))
-        return self._assemble(block.reshape(-1, 12, 12))
+        block = 0.5 * (block + block.transpose(0, 3, 4, 1, 2)).reshape(-1, 12, 12)
+        # projected Newton: each element's tangent clamped to positive semidefinite, so the
+        # step's matrix stays definite where compressed elements soften
+        values, vectors = np.linalg.eigh(block)
+        block = np.matmul(vectors * np.maximum(values, 0.0)[:, None, :], vectors.transpose(0, 2, 1))
+        return self._assemble(block)
 
     def _assemble(self, block: np.ndarray) -> sp.csc_matrix:
         """The free-free block of a matrix from per-element (E, 12, 12) blocks over the elements' dofs."""
@@ -394,7 +402,10 @@ class Layer:
                 rest = self.rest_positions(skin[None].astype(np.float64))[0]
                 shape, volume = self.geometry(rest)
             if solver is None or _drift(solver[1], rest, self.elements) > self.params.refactor_strain:
-                solver = _factorize_spd(self.linear_stiffness(shape, volume)), rest
+                # the rest tangent only preconditions the iterations; a slight mass shift keeps
+                # it invertible where a piece of the layer hangs on by a single node or edge
+                shift = sp.diags(np.repeat((2 * np.pi * _SAG_SHIFT_HZ) ** 2 * self.mass, 3))
+                solver = _factorize_spd(self.linear_stiffness(shape, volume) + shift), rest
             guess = 2.0 * sag - previous
             previous, sag = sag, guess
             load = self.mass[:, None] * turned[f]
@@ -418,7 +429,7 @@ def _outward_sign(points: np.ndarray, tri: np.ndarray) -> float:
     return -1.0 if np.sum((centroid - points.mean(axis=0)) * face) < 0 else 1.0
 
 
-def _tetrahedralize(points, normals, tri, depth, levels):
+def _tetrahedralize(points, normals, tri, depth, levels, min_depth):
     """(elements (E, 4) node indices, depth (V,)) of the layer, depth shrunk where prisms fold.
 
     Each triangle's prism per level splits into three tetrahedra by the lowest-index rule
@@ -426,8 +437,10 @@ def _tetrahedralize(points, normals, tri, depth, levels):
     bottom), so neighbouring prisms share their quads' diagonals and the mesh conforms.
     The depth is first capped by the skin's convex curvature and its slope limited; a
     prism whose tetrahedra are still flatter than _MIN_QUALITY of a right prism as deep as
-    its shallowest corner (or inverted) has the depth at its corners shrunk by _SHRINK,
-    until none is.
+    its shallowest corner (or inverted) has the depth at its corners shrunk by _SHRINK;
+    prisms still folded after _SHRINK_ROUNDS (their corners' normals disagree whatever the
+    depth: sharp creases of a real rig's eyelids and lips), or thinner than `min_depth` at
+    a corner, are left out of the layer.
     """
     columns = len(points)
     order = np.sort(tri, axis=1)
@@ -456,15 +469,16 @@ def _tetrahedralize(points, normals, tri, depth, levels):
             break
         shrink = np.unique(order[folded])
         depth[shrink] *= _SHRINK
-    else:
-        raise ValueError(f"the tissue layer folds under {int(folded.sum())} triangles after shrinking its depth 40 times; the skin mesh has degenerate or self-overlapping triangles")
+    folded |= depth[order].min(axis=1) < min_depth  # too thin to be tissue: a crease the layer skips
+    if folded.all():
+        raise ValueError("the tissue layer folds under every triangle: the skin mesh is degenerate")
     elements = []
     for level in range(levels):
         nodes = np.concatenate([order + level * columns, order + (level + 1) * columns], axis=1)
         tets = nodes[:, split]  # (T, 3, 4)
         flip = expected < 0
         tets[flip] = tets[flip][:, [1, 0, 2, 3]]
-        elements.append(tets.reshape(-1, 4))
+        elements.append(tets[~folded].reshape(-1, 4))
     return np.concatenate(elements), depth
 
 
@@ -492,6 +506,20 @@ def _convex_curvature(points: np.ndarray, normals: np.ndarray, edges: np.ndarray
     np.maximum.at(curvature, edges[:, 0], bend)
     np.maximum.at(curvature, edges[:, 1], bend)
     return curvature
+
+
+def _floating_nodes(elements: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """Nodes in no element, or in a piece of the layer that reaches no fixed node (left
+    behind by prisms and elements the layer leaves out): they are held."""
+    count = len(fixed)
+    pairs = elements[:, [0, 1, 2, 3, 0, 1]], elements[:, [1, 2, 3, 0, 2, 3]]
+    graph = sp.coo_matrix((np.ones(pairs[0].size), (pairs[0].ravel(), pairs[1].ravel())), shape=(count, count))
+    _, piece = connected_components(graph, directed=False)
+    anchored = np.zeros(piece.max() + 1, dtype=bool)
+    anchored[piece[fixed]] = True
+    used = np.zeros(count, dtype=bool)
+    used[elements.ravel()] = True
+    return np.flatnonzero(~used | ~anchored[piece])
 
 
 def _factorize_spd(matrix: sp.spmatrix):
@@ -598,7 +626,7 @@ def _integrate(layer: Layer, y: np.ndarray, skull: SkullMotion, fps: float, para
                 residual += (layer.damping @ v.reshape(-1)).reshape(-1, 3) + layer.forces(x, shape, volume)[free]
                 du = solver.solve(residual.reshape(-1)).reshape(-1, 3)
                 u = u - du
-                if np.abs(du).max() <= params.tolerance_cm:
+                if np.abs(du).max() <= params.tolerance_cm or not np.isfinite(du).all():
                     break
             else:
                 if attempt == 0:  # refactorize with the tangent where the iterations got to, and try once more
@@ -607,6 +635,9 @@ def _integrate(layer: Layer, y: np.ndarray, skull: SkullMotion, fps: float, para
                     solver, factorizations = factorize(layer.tangent_stiffness(x, shape, volume)), factorizations + 1
                     continue
                 raise ValueError(f"the volumetric tissue did not converge at frame {step // substeps}: "
+                                 "skull accelerations or expression changes too large for the step (raise substeps)")
+            if not np.isfinite(u).all():
+                raise ValueError(f"the volumetric tissue diverged at frame {step // substeps}: "
                                  "skull accelerations or expression changes too large for the step (raise substeps)")
             break
         a = c1 * (u - u_old - h * v_old) - a_old
