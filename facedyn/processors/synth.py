@@ -29,6 +29,11 @@ class SynthProcessor(Processor):
         Parameter("seed", int, 0, "seed of the protocol's random choices", minimum=0, maximum=2**32 - 1),
         Parameter("only", str, "", "only takes whose name matches this glob pattern", metavar="PATTERN"),
         Parameter("jobs", int, os.cpu_count() or 1, "takes simulated at once", minimum=1, maximum=1024),
+        Parameter("physics", str, "tissue", "soft-tissue model: tissue (facedyn's), or volumetric (a finite-element layer, "
+                  "a different family for testing)", ("tissue", "volumetric")),
+        Parameter("randomize_tissue", str, "none", "draw tissue parameters per take or once per corpus (the training "
+                  "learns the physics family, not one model)", ("none", "take", "corpus")),
+        Parameter("extra_motions", bool, False, "add dance, turn and jump takes (motions not fitted to the test mocap)"),
     )
 
     def prepare(self, request: Request) -> Plan:
@@ -36,7 +41,9 @@ class SynthProcessor(Processor):
 
         params = request.params
         rig = load_rig(params["rig"], params["actor_seed"])
-        specs = protocol(rig, params["scale"], params["data"], seed=params["seed"], noise_cm=params["noise"])
+        specs = protocol(rig, params["scale"], params["data"], seed=params["seed"], noise_cm=params["noise"],
+                         physics=params["physics"], extra_motions=params["extra_motions"],
+                         randomize_tissue=None if params["randomize_tissue"] == "none" else params["randomize_tissue"])
         if params["only"]:
             specs = [s for s in specs if fnmatch.fnmatch(s.name, params["only"])]
             if not specs:
@@ -50,7 +57,8 @@ class SynthProcessor(Processor):
         request, rig, specs = plan.state
         params = request.params
         description = {"scale": params["scale"], "rig": str(params["rig"] or "built-in"), "actor_seed": params["actor_seed"],
-                       "noise_cm": params["noise"], "seed": params["seed"]}
+                       "noise_cm": params["noise"], "seed": params["seed"], "physics": params["physics"],
+                       "randomize_tissue": params["randomize_tissue"], "extra_motions": params["extra_motions"]}
         index = build_corpus(request.output, rig, specs, progress=progress, description=description, jobs=params["jobs"])
         return FolderOutput({"takes": len(index["takes"]), "frames": index["frames"], "points": index["points"],
                              "simulated_frames_per_second": index["simulated_frames_per_second"], "jobs": params["jobs"]})
