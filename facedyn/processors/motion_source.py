@@ -16,11 +16,13 @@ PROCEDURAL = ("still", "walk", "run", "hop")
 MAX_PLATFORM_HZ = 100.0  # well above any tissue resonance; the simulated protocol uses 6-11 Hz
 
 
-def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head", seed: int = 0) -> tuple[np.ndarray, np.ndarray, str]:
+def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head", seed: int = 0, *,
+                 bvh: dict | None = None) -> tuple[np.ndarray, np.ndarray, str]:
     """(translate (F,3), orient (F,4), description) of `source` at fps over frame_count frames.
 
     source: a BVH file, a take (.usda/.usdc with a solved skull), or walk | run | hop |
-    still | platform:9hz.
+    still | platform:9hz. bvh: a BVH's `units` (cm per unit), `up` and `forward` axes
+    where the file cannot tell (None: read from the file).
     """
     duration = frame_count / fps
     kind, _, arg = source.partition(":")
@@ -40,7 +42,7 @@ def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head",
     if not path.exists():
         raise UsageError(f"skull motion {source!r}: not a file, nor one of {', '.join(PROCEDURAL)}, platform:HZ")
     if not path.suffix.lower().startswith(".usd"):  # anything but USD is read as mocap, which names what is wrong
-        trajectory = motion.from_bvh(path, joint)
+        trajectory = motion.from_bvh(path, joint, **(bvh or {}))
         if trajectory.fps != fps:
             trajectory = motion.resample(trajectory, fps)
         if trajectory.frame_count < frame_count:

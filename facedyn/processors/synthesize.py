@@ -15,6 +15,16 @@ from facedyn.processors.remove import model_inputs, offset_summary, read_with_mo
 from facedyn.progress import Progress
 
 
+AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
+BVH_PARAMETERS = (
+    Parameter("bvh_units", float, None, "cm per BVH unit (default: from the skeleton's height; CMU files 5.64)",
+              above=0.0, maximum=1000.0, metavar="CM"),
+    Parameter("bvh_up", str, None, "the BVH's up axis (default: from the skeleton)", AXES, metavar="AXIS"),
+    Parameter("bvh_forward", str, None, "the BVH's forward axis (default: where the toes point)", AXES, metavar="AXIS"),
+)
+
+
+
 class SynthesizeProcessor(Processor):
     name = "synthesize"
     version = "1"
@@ -25,6 +35,7 @@ class SynthesizeProcessor(Processor):
         Parameter("model", Path, help="the synthesis model file (from train-synthesis)", metavar="MODEL"),
         Parameter("skull_motion", str, "", "BVH file, a stabilized take, or walk|run|hop|still|platform:HZ (default: the take's own)"),
         Parameter("joint", str, "Head", "BVH joint that carries the skull"),
+        *BVH_PARAMETERS,
         Parameter("seed", int, 0, "seed of a procedural motion", minimum=0),
         Parameter("backend", str, "auto", "stretch kernels", BACKENDS),
         Parameter("device", str, "auto", "torch device for the network: auto, cpu, cuda, cuda:N", check=check_device),
@@ -36,7 +47,8 @@ class SynthesizeProcessor(Processor):
         perf, source, model = read_with_model(request, self.writes.role, "synthesis")
         params = request.params
         if params["skull_motion"]:
-            translate, orient, described = skull_motion(params["skull_motion"], perf.fps, perf.frame_count, params["joint"], params["seed"])
+            translate, orient, described = skull_motion(params["skull_motion"], perf.fps, perf.frame_count, params["joint"], params["seed"],
+                                                        bvh=bvh_options(params))
         else:
             (translate, orient), described = perf.skull(), "the take's own"
         description = {"take": str(request.inputs[0]), "frames": perf.frame_count, "skull_motion": described}
@@ -52,6 +64,11 @@ class SynthesizeProcessor(Processor):
         progress.finish()
         return synthesized_output(perf, source, params["model"], points, offsets, translate, orient, self.writes.role,
                                   {"skull_motion": described})
+
+
+def bvh_options(params: dict) -> dict:
+    """The BVH conventions given on the command line (the rest are read from the file)."""
+    return {key: params[f"bvh_{key}"] for key in ("units", "up", "forward") if params[f"bvh_{key}"] is not None}
 
 
 def synthesized_output(perf, source, model_path, points, offsets, translate, orient, role_name, extra) -> LayerOutput:
