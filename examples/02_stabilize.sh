@@ -7,7 +7,7 @@ source "$(dirname "${BASH_SOURCE[0]}")/_setup.sh" "${1:-}"
 ensure_corpus
 
 step "start from the captured take: take.usda lists only capture.usdc"
-take_stack "$TAKE_DIR/take.usda" "$TAKE_DIR/capture.usdc"
+fd layers "$TAKE_DIR/take.usda"  # stabilize reads the capture below its role, whatever lies above; a re-run replaces its layer
 
 step "mode pursuit (the default method), attached to take.usda as its strongest layer"
 fd stabilize "$TAKE_DIR/take.usda" -o "$TAKE_DIR/stabilized.usdc" --attach "$TAKE_DIR/take.usda" --json > "$WORK/stabilize.mode-pursuit.json"

@@ -8,7 +8,7 @@ ensure_stabilized "$TAKE_DIR"
 ensure_removal_model  # usdfacedyn train-removal CORPUS -o face.removal --skull truth --epochs N
 
 step "start from the stabilized take"
-take_stack "$TAKE_DIR/take.usda" "$TAKE_DIR/stabilized.usdc" "$TAKE_DIR/capture.usdc"
+fd layers "$TAKE_DIR/take.usda"  # remove reads the stabilized take below its role
 
 step "remove the dynamics that F predicts; attach quasistatic.usdc to the take"
 fd remove "$TAKE_DIR/take.usda" --model "$REMOVAL_MODEL" -o "$TAKE_DIR/quasistatic.usdc" --attach "$TAKE_DIR/take.usda"

@@ -9,7 +9,7 @@ ensure_quasistatic "$TAKE_DIR"
 ensure_synthesis_model  # usdfacedyn train-synthesis CORPUS -o face.synthesis --quasistatic face.removal --skull truth
 
 step "start from the quasistatic take"
-take_stack "$TAKE_DIR/take.usda" "$TAKE_DIR/quasistatic.usdc" "$TAKE_DIR/stabilized.usdc" "$TAKE_DIR/capture.usdc"
+fd layers "$TAKE_DIR/take.usda"  # synthesize reads the quasistatic take below every synthesized variant
 
 step "synthesize under a procedural hop (walk, run, still, platform:9hz work the same way)"
 fd synthesize "$TAKE_DIR/take.usda" --model "$SYNTHESIS_MODEL" --skull-motion hop \

@@ -12,9 +12,9 @@ ensure_synthesis_model
 ensure_quasistatic "$OTHER_DIR"
 
 step "the source: $OTHER_NAME, stabilized and with its dynamics removed"
-take_stack "$OTHER_DIR/take.usda" "$OTHER_DIR/quasistatic.usdc" "$OTHER_DIR/stabilized.usdc" "$OTHER_DIR/capture.usdc"
+fd layers "$OTHER_DIR/take.usda"
 step "the target: $TAKE_NAME, quasistatic"
-take_stack "$TAKE_DIR/take.usda" "$TAKE_DIR/quasistatic.usdc" "$TAKE_DIR/stabilized.usdc" "$TAKE_DIR/capture.usdc"
+fd layers "$TAKE_DIR/take.usda"  # retarget reads the quasistatic take below the variants
 
 step "retarget by synthesis (the default method), attached to the target take"
 fd retarget "$TAKE_DIR/take.usda" --source "$OTHER_DIR/take.usda" --model "$SYNTHESIS_MODEL" \

@@ -43,25 +43,6 @@ step() { printf '\n== %s\n' "$*"; }
 show() { printf '$ %s\n' "$*" >&2; "$@"; }
 fd() { show "$USDFACEDYN" "$@"; }
 
-# take_stack ROOT LAYER... : set ROOT's subLayers to exactly these layers (strongest first).
-# A processor reads the whole composed take, so each example first puts the take back in
-# the state its step starts from; this makes re-running an example give the same result.
-take_stack() {
-    local root="$1"; shift
-    "$PYTHON" - "$root" "$@" <<'PY'
-import sys
-from pathlib import Path
-from pxr import Sdf
-import facedyn.usd  # noqa: F401  (registers the schemas)
-from facedyn.usd.layers import write_take_root
-from facedyn.usd.timing import Timing
-
-root, layers = Path(sys.argv[1]), [Path(p) for p in sys.argv[2:]]
-write_take_root(root, layers, Timing.from_layer(Sdf.Layer.FindOrOpen(str(layers[-1]))))
-print(f"take stack of {root.name}: " + ", ".join(p.name for p in layers))
-PY
-}
-
 # note KEY MESSAGE: print MESSAGE once per script.
 declare -A _NOTED=()
 note() { [[ -n "${_NOTED[$1]:-}" ]] || { _NOTED[$1]=1; echo "$2"; }; }
@@ -81,7 +62,6 @@ ensure_stabilized() {
     ensure_corpus
     if [[ -f "$dir/stabilized.usdc" ]]; then return; fi
     step "stabilize $(basename "$dir") (mode pursuit)"
-    take_stack "$dir/take.usda" "$dir/capture.usdc"
     fd stabilize "$dir/take.usda" -o "$dir/stabilized.usdc" --attach "$dir/take.usda" -q
 }
 
@@ -103,7 +83,6 @@ ensure_quasistatic() {
     ensure_removal_model
     if [[ -f "$dir/quasistatic.usdc" ]]; then return; fi
     step "remove the secondary dynamics of $(basename "$dir")"
-    take_stack "$dir/take.usda" "$dir/stabilized.usdc" "$dir/capture.usdc"
     fd remove "$dir/take.usda" --model "$REMOVAL_MODEL" -o "$dir/quasistatic.usdc" --attach "$dir/take.usda" -q
 }
 
@@ -123,7 +102,6 @@ ensure_synthesized() {
     ensure_synthesis_model
     if [[ -f "$TAKE_DIR/synthesized.hop.usdc" ]]; then return; fi
     step "synthesize dynamics for a hop"
-    take_stack "$TAKE_DIR/take.usda" "$TAKE_DIR/quasistatic.usdc" "$TAKE_DIR/stabilized.usdc" "$TAKE_DIR/capture.usdc"
     fd synthesize "$TAKE_DIR/take.usda" --model "$SYNTHESIS_MODEL" --skull-motion hop \
         -o "$TAKE_DIR/synthesized.hop.usdc" --attach "$TAKE_DIR/take.usda" -q
 }
