@@ -3,6 +3,8 @@
 Small corpus, few epochs: this checks the contract (layers, composition, errors), and that
 each step beats doing nothing against the simulator's truth; benchmarks/ measures accuracy.
 """
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -159,3 +161,84 @@ def test_training_skull_features(corpus, capsys, tmp_path):
                "--epochs", "1", "--include", "smile*", "--samples", "32") == 0
     assert json.loads(capsys.readouterr().out)["summary"]["skull_features"] == {"kind": "acceleration", "past": 30, "future": 10}
     assert load_model(tmp_path / "acc.removal").skull_motion == SkullMotionInput()
+
+
+def _stack(root):
+    layer = Sdf.Layer.OpenAsAnonymous(str(root))
+    return list(layer.subLayerPaths)
+
+
+def test_issue_15_output_clashes_are_usage_errors_that_write_nothing(corpus, tmp_path, capsys):
+    """Each clash a pipeline TD met: overwriting an input layer, a root, or a layer that lists itself."""
+    import shutil
+
+    folder, models = corpus
+    take = tmp_path / "take"
+    shutil.copytree(folder / "smile_walk", take)
+    root = take / "take.usda"
+    before = {p.name: p.read_bytes() for p in take.glob("*.usd*")}
+    assert cli("stabilize", root, "-o", take / "capture.usdc") == 2  # the capture it reads
+    assert cli("stabilize", root, "-o", take / "s.usdc", "--attach", take / "s.usdc") == 2  # a layer listing itself
+    assert cli("import", take / "capture.usdc", "-o", take / "cap.usdc", "--root", take / "capture.usdc") == 2  # edits its source
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    shutil.copy(take / "capture.usdc", sub / "src.usdc")
+    assert cli("import", sub / "src.usdc", "-o", sub / "take.usda") == 2  # the default root would list itself
+    assert cli("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root) == 0
+    assert cli("remove", root, "--model", models / "f.removal", "-o", take / "stabilized.usdc", "--attach", root) == 2  # the skull solve
+    errors = capsys.readouterr().err
+    assert errors.count("usage error") == 5 and "Traceback" not in errors
+    assert {p.name: p.read_bytes() for p in take.glob("*.usd*") if p.name in before} == before | {"take.usda": (take / "take.usda").read_bytes()}
+    assert not (take / "s.usdc").exists() and not (take / "cap.usdc").exists() and not (sub / "take.usda").exists()
+
+
+def test_issue_15_re_runs_read_below_their_role_and_keep_the_layers_above(corpus, tmp_path, capsys):
+    import shutil
+
+    from facedyn.usd.stackstatus import stack_status
+
+    folder, models = corpus
+    take = tmp_path / "take"
+    shutil.copytree(folder / "jaw_open_walk", take)
+    root = take / "take.usda"
+    assert cli("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root) == 0
+    assert cli("remove", root, "--model", models / "f.removal", "-o", take / "quasistatic.usdc", "--attach", root) == 0
+    assert cli("synthesize", root, "--model", models / "h.synthesis", "--skull-motion", "hop", "-o", take / "synthesized.hop.usdc",
+               "--attach", root) == 0
+    assert cli("preview", root, "-o", take / "take.preview.usdc", "--attach", root) == 0
+    stack = _stack(root)
+    first_solve = (take / "stabilized.usdc").read_bytes()
+    # Re-running stabilize solves from the capture (not the synthesized points), in place, keeping everything above.
+    assert cli("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root, "--iterations", "6") == 0
+    assert _stack(root) == stack
+    assert (take / "stabilized.usdc").read_bytes() != first_solve
+    stale = {Path(s.asset).name for s in stack_status(root) if s.stale}
+    assert stale == {"quasistatic.usdc", "synthesized.hop.usdc", "take.preview.usdc"}
+    # remove on a take whose composed role is synthesized reads the stabilized take below it.
+    assert read_take(root)[0].role == "synthesized"
+    assert cli("remove", root, "--model", models / "f.removal", "-o", take / "quasistatic.usdc", "--attach", root) == 0
+    assert _stack(root) == stack
+    assert "quasistatic.usdc" not in {Path(s.asset).name for s in stack_status(root) if s.stale}
+    # Running the same step twice on the same inputs gives the same bytes.
+    again = (take / "quasistatic.usdc").read_bytes()
+    assert cli("remove", root, "--model", models / "f.removal", "-o", take / "quasistatic.usdc", "--attach", root) == 0
+    assert (take / "quasistatic.usdc").read_bytes() == again
+
+
+def test_issue_15_partial_frames_and_failed_attaches_leave_nothing(corpus, tmp_path, capsys):
+    import shutil
+
+    folder, _ = corpus
+    take = tmp_path / "take"
+    shutil.copytree(folder / "smile_hop", take)
+    root = take / "take.usda"
+    frames = read_take(root)[0].frames
+    middle = f"{frames[0]:g}:{frames[len(frames) // 2]:g}"
+    assert cli("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root, "--frames", middle) == 2
+    assert "covers only part" in capsys.readouterr().err and not (take / "stabilized.usdc").exists()
+    assert cli("stabilize", root, "-o", take / "partial.usdc", "--frames", middle) == 0  # not attached: allowed
+    (take / "broken.usda").write_text("#usda 1.0\n(\n garbage\n")
+    for bad_root in (take / "missing.usda", take / "broken.usda"):
+        assert cli("stabilize", root, "-o", take / "orphan.usdc", "--attach", bad_root) == 1
+        assert not (take / "orphan.usdc").exists()
+    assert _stack(root) == ["./capture.usdc"]
