@@ -116,14 +116,18 @@ class CanonicalMesh:
 def _usd_source(path: Path, mesh: str, frames=None, static_ok: bool = False, whole_frames: bool = True):
     """(stage, the mesh prim, its time codes): the named mesh, else the only animated one.
 
-    `whole_frames`: the time codes must be consecutive whole frames (see select_time_codes).
+    A UsdSkel animation is baked first (in memory), so a skinned or blend-shape rig's mesh
+    counts as animated. `whole_frames`: the time codes must be consecutive whole frames
+    (see select_time_codes).
     """
     from facedyn.usd.errors import TakeError
+    from facedyn.usd.skel import bake_skel_animations
     from facedyn.usd.stage import get_prim, layer_name, open_stage
     from facedyn.usd.take import find_animated_meshes, select_time_codes
     from pxr import UsdGeom
 
     stage = open_stage(path)
+    bake_skel_animations(stage)
     if mesh:
         mesh_prim = get_prim(stage, mesh)
         if not mesh_prim.IsA(UsdGeom.Mesh):
