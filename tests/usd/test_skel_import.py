@@ -70,9 +70,8 @@ def test_import_bakes_blend_shapes_and_a_joint(tmp_path):
 
 
 def test_import_bakes_the_ict_rig_driven_by_weights(tmp_path, shared_data):
-    from conftest import ICT_RIG
-
-    rig = Usd.Stage.Open(str(ICT_RIG))
+    ict_rig = shared_data / "ict-facekit" / "ict_face_rig.usdc"
+    rig = Usd.Stage.Open(str(ict_rig))
     skin = rig.GetPrimAtPath("/ICTFace/Skin")
     neutral = np.asarray(UsdGeom.Mesh(skin).GetPointsAttr().Get(), np.float64)
     names = ["jawOpen", "mouthSmile_L"]
@@ -87,7 +86,7 @@ def test_import_bakes_the_ict_rig_driven_by_weights(tmp_path, shared_data):
     weights = np.array([[0.0, 0.0], [0.5, 0.0], [1.0, 0.25], [0.2, 1.0]])
     # A performance layer over the rig: a skeleton (one still joint) whose animation keys two weights.
     performance = Usd.Stage.CreateNew(str(tmp_path / "performance.usda"))
-    performance.GetRootLayer().subLayerPaths = [str(ICT_RIG)]
+    performance.GetRootLayer().subLayerPaths = [str(ict_rig)]
     performance.SetTimeCodesPerSecond(24)
     performance.SetFramesPerSecond(24)
     skel = UsdSkel.Skeleton.Define(performance, "/ICTFace/Skel")
