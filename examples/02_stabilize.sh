@@ -21,11 +21,9 @@ import json
 import sys
 from pathlib import Path
 
-from pxr import Sdf, Usd
-
 from facedyn.evaluation import stabilization_errors
 from facedyn.usd.corpus import read_truth
-from facedyn.usd.take import read_stage
+from facedyn.usd.take import read_layers
 
 work, take = Path(sys.argv[1]), Path(sys.argv[2])
 truth = read_truth(take)
@@ -34,9 +32,7 @@ for method, layer in (("mode-pursuit", "stabilized.usdc"), ("three-point", "thre
     report = json.loads((work / f"stabilize.{method}.json").read_text())
     solve = report["summary"]["median_solve_error_cm"]
     # Compose the solved layer over the capture in memory (the three-point layer is not attached).
-    root = Sdf.Layer.CreateAnonymous(".usda")
-    root.subLayerPaths = [str(take / layer), str(take / "capture.usdc")]
-    solved, _ = read_stage(Usd.Stage.Open(root), take / layer)
+    solved = read_layers([take / layer, take / "capture.usdc"])
     errors = stabilization_errors(*solved.skull(), truth.skull_translate, truth.skull_orient, truth.points + truth.offsets)
     print(f"{method:<14}{solve:>26.5f}{errors['median_vertex_cm']:>36.5f}")
 PY

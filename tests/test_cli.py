@@ -237,11 +237,56 @@ def test_import_obj_sequence(tmp_path, capsys):
     code, _, err = run(["import", *sorted(folder.glob("*.obj")), "-o", tmp_path / "capture.usdc", "--fps", "30", "--units", "0.1", "-q"], capsys)
     assert code == 0, err
     perf, _ = read_take(tmp_path / "take.usda")
-    np.testing.assert_array_equal(perf.frames, [1001, 1002, 1010])
-    np.testing.assert_allclose(perf.points[2], (points + 10.10) * 0.1, atol=1e-5)
+    # The gap 1003..1009 is filled by interpolation over time (the motion is linear, so exactly).
+    np.testing.assert_array_equal(perf.frames, np.arange(1001, 1011))
+    np.testing.assert_allclose(perf.points[9], (points + 10.10) * 0.1, atol=1e-5)
+    np.testing.assert_allclose(perf.points[5], (points + 10.06) * 0.1, atol=1e-5)
     assert perf.fps == 30.0 and perf.uvs.indices is not None
     # A frame whose topology differs is named in the error.
     write_obj(folder / "face.1011.obj", ObjMesh(points, counts[:-1], indices[:-4]))
     code, _, err = run(["import", folder, "-o", tmp_path / "capture2.usdc", "--fps", "30", "-q"], capsys)
     _assert_clean_failure(code, err, 1, "face.1011.obj")
     assert not (tmp_path / "capture2.usdc").exists()
+
+
+def _cubic_motion(points, seconds):
+    """Points moving along a cubic polynomial in time (reproduced exactly by a cubic spline)."""
+    t = np.asarray(seconds, np.float64)[:, None, None]
+    return (points[None] + t * np.array([3.0, -1.0, 0.5]) + t**2 * np.array([-2.0, 4.0, 1.0]) + t**3 * np.array([5.0, 0.0, -3.0])).astype(np.float32)
+
+
+def test_import_fps_resamples_a_capture_onto_whole_frames(tmp_path, capsys):
+    points, counts, indices = grid_mesh(3)
+    source = write_mesh_cache(tmp_path / "at30.usda", _cubic_motion(points, np.arange(9) / 30.0), counts, indices, fps=30.0)
+    code, out, err = run(["import", source, "-o", tmp_path / "capture.usdc", "--fps", "120", "--json"], capsys)
+    assert code == 0, err
+    assert json.loads(out)["summary"]["source_fps"] == 30.0
+    perf, _ = read_take(tmp_path / "take.usda")
+    assert perf.fps == 120.0
+    np.testing.assert_array_equal(perf.frames, np.arange(1001, 1034))  # 8/30 s at 120 fps, from the source's first frame
+    np.testing.assert_allclose(perf.points, _cubic_motion(points, np.arange(33) / 120.0), atol=1e-4)
+    np.testing.assert_allclose(perf.points[::4], _cubic_motion(points, np.arange(9) / 30.0), atol=1e-5)
+
+
+def test_import_refuses_samples_between_frames_unless_resampled(tmp_path, capsys):
+    points, counts, indices = grid_mesh(3)
+    seconds = np.arange(10) / 120.0
+    source = write_mesh_cache(tmp_path / "between.usda", _cubic_motion(points, seconds), counts, indices, fps=24.0)
+    stage = Usd.Stage.Open(str(source))
+    attr = stage.GetPrimAtPath("/Cache/Geo/Face").GetAttribute("points")
+    values = [attr.Get(t) for t in attr.GetTimeSamples()]
+    attr.Clear()
+    for i, value in enumerate(values):
+        attr.Set(value, 1001 + i * 0.2)  # a 120 fps capture authored at 24 time codes/s
+    stage.Save()
+    code, _, err = run(["import", source, "-o", tmp_path / "capture.usdc"], capsys)
+    _assert_clean_failure(code, err, 1, "between.usda", "1001.2 is not a whole frame", "--fps 120")
+    assert not (tmp_path / "capture.usdc").exists()
+    code, _, err = run(["import", source, "-o", tmp_path / "capture.usdc", "--fps", "120", "-q"], capsys)
+    assert code == 0, err
+    perf, _ = read_take(tmp_path / "take.usda")
+    np.testing.assert_array_equal(perf.frames, np.arange(1001, 1011))
+    np.testing.assert_allclose(perf.points, _cubic_motion(points, seconds), atol=1e-5)
+    for bad in ("nan", "inf", "-1"):
+        code, _, err = run(["import", source, "-o", tmp_path / "bad.usdc", "--fps", bad], capsys)
+        assert code == 2 and "--fps" in err

@@ -112,7 +112,7 @@ class DynamicsModel:
             if theirs != self.fingerprint:
                 raise ModelMismatch(f"the {self.kind} model was trained on mesh topology {self.fingerprint}, but this mesh has topology {theirs}")
         if fps is not None and not abs(float(fps) - self.fps) <= 1e-6 * self.fps:
-            raise ModelMismatch(f"the {self.kind} model was trained at {self.fps:g} fps, but this take runs at {float(fps):g} fps; its velocity windows would not match")
+            raise ModelMismatch(f"the {self.kind} model was trained at {self.fps:g} fps, but this take runs at {float(fps):g} fps; its velocity windows would not match (resample the capture with `usdfacedyn import CAPTURE --fps {self.fps:g}`)")
 
     def propagator(self):
         """The sample-to-mesh propagation of this model's face, built once."""

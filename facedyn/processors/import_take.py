@@ -3,6 +3,12 @@
 The capture layer defines facedyn's layout (/Performance/Skull/Face), with the skull at the
 identity and the tracked points baked to world space in centimetres, Y up; a `take.usda`
 root beside it lists it as its base sublayer, ready for stabilize and the others.
+
+A take's frames are consecutive whole frames at its rate (facedyn.usd.takechecks). A USD
+capture that is not (samples between frames, gaps, a rate other than the model's) is
+resampled with `--fps RATE`: points by cubic interpolation over time, frame numbers on the
+new grid starting at the source's first frame. An OBJ sequence's --fps is its own rate, and
+gaps in its frame numbers are filled the same way (the summary counts them).
 """
 from __future__ import annotations
 
@@ -17,7 +23,7 @@ from facedyn.errors import UsageError
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.progress import Progress
 
-CENTIMETRES = 0.01  # metersPerUnit of every facedyn take
+MAX_RESAMPLED_BYTES = 8 << 30  # a resampled capture larger than this is refused before it is allocated
 
 
 class ImportProcessor(Processor):
@@ -28,8 +34,8 @@ class ImportProcessor(Processor):
     writes = Writes("layer", role="captured", help="the capture layer to write (.usdc); its take root is created beside it")
     parameters = (
         Parameter("mesh", str, "", "prim path of the animated Mesh in a USD source (default: the only one)"),
-        Parameter("fps", float, 0.0, "frame rate of an OBJ sequence (required for OBJ; USD sources carry theirs)",
-                  minimum=0.0, maximum=10000.0),
+        Parameter("fps", float, 0.0, "OBJ: the sequence's frame rate (required); USD: resample the capture to this rate "
+                  "onto whole frames (needed when its samples have gaps or fall between frames)", minimum=0.0, maximum=10000.0),
         Parameter("units", float, 1.0, "centimetres per unit of an OBJ sequence", above=0.0, maximum=1e6),
         Parameter("root", Path, None, "take root to create or extend (default: take.usda beside the output)", metavar="ROOT"),
     )
@@ -45,9 +51,12 @@ class ImportProcessor(Processor):
         source = _source(request)
         root = self.take_root(request)
         if source.kind == "usd":
-            stage, mesh_prim, time_codes = _usd_source(source.paths[0], request.params["mesh"], request.frames)
+            resample = request.params["fps"] > 0
+            stage, mesh_prim, time_codes = _usd_source(source.paths[0], request.params["mesh"], request.frames, whole_frames=not resample)
             description = {"source": str(source.paths[0]), "mesh": str(mesh_prim.GetPath()), "frames": len(time_codes),
                            "fps": stage.GetTimeCodesPerSecond(), "root": str(root)}
+            if resample:
+                description["resample_fps"] = request.params["fps"]
             return Plan(description, (source, request, root, (stage, mesh_prim, time_codes)))
         _require_fps(request)
         description = {"source": f"{len(source.paths)} OBJ files", "fps": request.params["fps"], "root": str(root)}
@@ -104,14 +113,21 @@ class CanonicalMesh:
     source_fps: tuple[float, float]  # the source stage's (timeCodesPerSecond, framesPerSecond)
 
 
-def _usd_source(path: Path, mesh: str, frames=None, static_ok: bool = False):
-    """(stage, the mesh prim, its time codes): the named mesh, else the only animated one."""
+def _usd_source(path: Path, mesh: str, frames=None, static_ok: bool = False, whole_frames: bool = True):
+    """(stage, the mesh prim, its time codes): the named mesh, else the only animated one.
+
+    A UsdSkel animation is baked first (in memory), so a skinned or blend-shape rig's mesh
+    counts as animated. `whole_frames`: the time codes must be consecutive whole frames
+    (see select_time_codes).
+    """
     from facedyn.usd.errors import TakeError
+    from facedyn.usd.skel import bake_skel_animations
     from facedyn.usd.stage import get_prim, layer_name, open_stage
     from facedyn.usd.take import find_animated_meshes, select_time_codes
     from pxr import UsdGeom
 
     stage = open_stage(path)
+    bake_skel_animations(stage)
     if mesh:
         mesh_prim = get_prim(stage, mesh)
         if not mesh_prim.IsA(UsdGeom.Mesh):
@@ -128,7 +144,7 @@ def _usd_source(path: Path, mesh: str, frames=None, static_ok: bool = False):
         mesh_prim = animated[0]
     if static_ok and UsdGeom.Mesh(mesh_prim).GetPointsAttr().GetNumTimeSamples() == 0:
         return stage, mesh_prim, None
-    return stage, mesh_prim, select_time_codes(stage, mesh_prim, frames)
+    return stage, mesh_prim, select_time_codes(stage, mesh_prim, frames, whole_frames)
 
 
 def read_usd_mesh(path: Path, mesh: str = "", frames=None, first_frame_only: bool = False, usd=None) -> CanonicalMesh:
@@ -137,6 +153,7 @@ def read_usd_mesh(path: Path, mesh: str = "", frames=None, first_frame_only: boo
     from facedyn.usd.errors import TakeError
     from facedyn.usd.stage import layer_name
     from facedyn.usd.take import ensure_finite, read_topology, read_uvs, read_vec3_samples
+    from facedyn.usd.takechecks import CENTIMETRES
     from facedyn.usd.timing import Timing
     from pxr import Usd, UsdGeom
 
@@ -170,16 +187,23 @@ def read_usd_mesh(path: Path, mesh: str = "", frames=None, first_frame_only: boo
 def _import_usd(path: Path, usd, request: Request, progress: Progress) -> LayerOutput:
     from facedyn.usd import schema
     from facedyn.usd.layers import LayerContent
+    from facedyn.usd.takechecks import CENTIMETRES, frame_grid_problem
     from facedyn.usd.timing import Timing
 
     mesh = read_usd_mesh(path, usd=usd)
     face = mesh.face
     face.role = "captured"
-    layer = LayerContent(frames=mesh.frames, points=mesh.points, topology=mesh.topology, uvs=mesh.uvs, face=face,
-                         skull=schema.SkullAttributes(solver="identity"))
     tcps, fps = mesh.source_fps
-    out_timing = Timing(tcps, fps, float(mesh.frames[0]), float(mesh.frames[-1]), CENTIMETRES, "Y")
+    frames, points = mesh.frames, mesh.points
     summary = {"source_mesh": mesh.prim_path, "points": mesh.points.shape[1], "fps": tcps}
+    rate = request.params["fps"]
+    if rate > 0 and not (rate == tcps and frame_grid_problem(frames, tcps) is None):
+        frames, points = resample(points, frames / tcps, rate, round(float(frames[0])), str(path))
+        tcps = fps = rate
+        summary.update(fps=rate, source_fps=mesh.source_fps[0], source_frames=len(mesh.frames))
+    layer = LayerContent(frames=frames, points=points, topology=mesh.topology, uvs=mesh.uvs, face=face,
+                         skull=schema.SkullAttributes(solver="identity"))
+    out_timing = Timing(tcps, fps, float(frames[0]), float(frames[-1]), CENTIMETRES, "Y")
     return LayerOutput(layer=layer, timing=out_timing, inputs=[str(path)], define=True, summary=summary)
 
 
@@ -188,6 +212,7 @@ def _import_obj(paths: list[Path], request: Request, progress: Progress) -> Laye
     from facedyn.performance import Topology
     from facedyn.usd import schema
     from facedyn.usd.layers import LayerContent
+    from facedyn.usd.takechecks import CENTIMETRES, frame_grid_problem
     from facedyn.usd.timing import Timing
 
     fps = _require_fps(request)
@@ -198,18 +223,46 @@ def _import_obj(paths: list[Path], request: Request, progress: Progress) -> Laye
             raise UsageError(f"no OBJ frame in {request.frames[0]:g}:{request.frames[1]:g}")
         paths, frames = [p for p, k in zip(paths, keep) if k], frames[keep]
     sequence = read_obj_sequence(paths, progress=progress)
-    points = sequence.points * request.params["units"]
+    points = (sequence.points * request.params["units"]).astype(np.float32)
+    read_frames = len(frames)
+    if frame_grid_problem(frames, fps) is not None:  # gaps in the frame numbers
+        frames, points = resample(points, frames / fps, fps, frames[0], str(paths[0].parent))
     layer = LayerContent(
         frames=frames,
-        points=points.astype(np.float32),
+        points=points,
         topology=Topology(sequence.face_vertex_counts, sequence.face_vertex_indices),
         uvs=sequence.uvs,
         face=schema.FaceAttributes(role="captured"),
         skull=schema.SkullAttributes(solver="identity"),
     )
     timing = Timing(fps, fps, float(frames[0]), float(frames[-1]), CENTIMETRES, "Y")
-    summary = {"obj_files": len(paths), "points": points.shape[1], "fps": fps}
+    summary = {"obj_files": len(paths), "points": points.shape[1], "fps": fps, "filled_frames": len(frames) - read_frames}
     return LayerOutput(layer=layer, timing=timing, inputs=[str(p) for p in paths], define=True, summary=summary)
+
+
+def resample(points: np.ndarray, seconds: np.ndarray, rate: float, first_frame: float, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """(frames, points) on whole frames first_frame, first_frame + 1, ... every 1/rate s from the first sample.
+
+    points (F, N, 3) sampled at increasing `seconds` are interpolated over time by a cubic
+    spline (not-a-knot ends; quadratic or linear when there are only 3 or 2 samples), which
+    reproduces motion that is a cubic polynomial in time exactly; samples already on the
+    grid come back unchanged up to float32 rounding. `source` names the input in errors.
+    """
+    from scipy.interpolate import make_interp_spline
+
+    from facedyn.usd.errors import TakeError
+
+    count = int(np.floor((seconds[-1] - seconds[0]) * rate + 1e-6)) + 1
+    size = count * points.shape[1] * 3 * 4
+    if size > MAX_RESAMPLED_BYTES:
+        raise TakeError(f"{source}: resampled to {rate:g} fps the capture would hold {count} frames ({size / 2**30:.1f} GiB); "
+                        f"import a shorter range with --frames")
+    frames = first_frame + np.arange(count, dtype=np.float64)
+    if len(seconds) == 1:
+        return frames, points.astype(np.float32)
+    spline = make_interp_spline(seconds, points.astype(np.float64), k=min(3, len(seconds) - 1), axis=0)
+    grid = seconds[0] + np.arange(count, dtype=np.float64) / rate
+    return frames, spline(np.minimum(grid, seconds[-1])).astype(np.float32)
 
 
 def _frame_number_key(path: Path):

@@ -1,4 +1,10 @@
-"""`usdfacedyn inspect`: what a take is made of, strongest layer first, with each layer's role and staleness."""
+"""`usdfacedyn inspect`: what a take is made of, strongest layer first, with each layer's role and staleness.
+
+Provenance metadata is shown as recorded; a field of the wrong type or unparseable JSON is
+listed among the layer's `problems` instead of stopping the report. A single result layer
+(which overrides a face some other layer defines) is described by its provenance: role,
+processor, run and inputs, and which take root to inspect for the composed take.
+"""
 from __future__ import annotations
 
 import json
@@ -8,8 +14,9 @@ from pathlib import Path
 from pxr import Sdf, UsdGeom
 
 from facedyn.usd import schema
+from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import is_take_root, layer_metadata, recorded_role_name
-from facedyn.usd.stackstatus import LayerStatus, stack_status
+from facedyn.usd.stackstatus import LayerStatus, frame_range, stack_status
 from facedyn.usd.stage import open_stage
 from facedyn.usd.take import find_face_mesh
 
@@ -35,7 +42,13 @@ def describe_take(path: str | os.PathLike) -> dict:
         for layer in stage.GetLayerStack(includeSessionLayers=False)
     ]
     description["mutedOnDisk"] = [s.asset for s in statuses if s.muted]
-    face = find_face_mesh(stage)
+    try:
+        face = find_face_mesh(stage)
+    except TakeError:
+        if statuses or not layer_metadata(stage.GetRootLayer()):
+            raise
+        description["face"] = None  # a result layer on its own: its provenance says what it is
+        return description
     mesh = UsdGeom.Mesh(face)
     points_attr = mesh.GetPointsAttr()
     samples = points_attr.GetTimeSamples()
@@ -58,29 +71,57 @@ def describe_take(path: str | os.PathLike) -> dict:
 
 def _describe_layer(layer: Sdf.Layer, status: LayerStatus | None) -> dict:
     data = layer_metadata(layer) or {}
+    problems = [f"{key} is a {type(data[key]).__name__}, expected text" for key in ("processor", "version", "role", "run")
+                if key in data and not isinstance(data[key], str)]
+    text = {key: value for key, value in data.items() if isinstance(value, str)}
+    frames = frame_range(data)
+    if "frameRange" in data and frames is None:
+        problems.append("frameRange is not two finite frame numbers")
+    inputs = schema.string_list(data.get("inputs", []))
+    if inputs is None:
+        problems.append(f"inputs is a {type(data['inputs']).__name__}, expected a list of layers")
+    parameters, problem = _parameters(data)
     entry = {
         "layer": layer.realPath or layer.identifier,
-        "processor": data.get("processor", data.get("role", "")),
-        "version": data.get("version", ""),
-        "frameRange": list(data["frameRange"]) if "frameRange" in data else None,
-        "inputs": list(data.get("inputs", [])),
-        "parameters": json.loads(data["parameters"]) if "parameters" in data else {},
-        "role": recorded_role_name(data) or "",
-        "run": data.get("run", ""),
+        "processor": text.get("processor", text.get("role", "")),
+        "version": text.get("version", ""),
+        "frameRange": list(frames) if frames else None,
+        "inputs": inputs or [],
+        "parameters": parameters,
+        "role": (recorded_role_name(text) or "") if "role" in text or "processor" in text else "",
+        "run": text.get("run", ""),
         "stale": bool(status and status.stale),
         "staleReason": status.reason if status else "",
         "coversTake": status.covers if status else True,
+        "problems": problems + ([problem] if problem else []),
     }
     return entry
+
+
+def _parameters(data: dict) -> tuple[dict, str]:
+    """The recorded parameters (a JSON object in text) and what is wrong with them ("" when nothing)."""
+    raw = data.get("parameters", "{}")
+    if not isinstance(raw, str):
+        return {}, f"parameters is a {type(raw).__name__}, expected JSON text"
+    try:
+        parameters = json.loads(raw)
+    except ValueError as exc:
+        return {}, f"parameters are not valid JSON ({exc})"
+    if not isinstance(parameters, dict):
+        return {}, f"parameters are JSON {type(parameters).__name__}, expected an object"
+    return parameters, ""
 
 
 def format_description(d: dict) -> str:
     t = d["timing"]
     face = d["face"]
+    timing = (f"timing: {t['timeCodesPerSecond']:g} time codes/s, {t['framesPerSecond']:g} fps, "
+              f"{t['startTimeCode']:g}..{t['endTimeCode']:g}, metersPerUnit {t['metersPerUnit']:g}, up {t['upAxis']}")
+    if face is None:
+        return _format_result_layer(d["take"], d["layers"][0], timing)
     lines = [
         f"take: {d['take']}",
-        f"timing: {t['timeCodesPerSecond']:g} time codes/s, {t['framesPerSecond']:g} fps, "
-        f"{t['startTimeCode']:g}..{t['endTimeCode']:g}, metersPerUnit {t['metersPerUnit']:g}, up {t['upAxis']}",
+        timing,
         f"face: {face['prim']} ({face['points']} points, {face['faces']} faces, {face['frames']} frames), "
         f"role {face['role']}, skull solver {face['skullSolver']}, offsets {'yes' if face['hasDynamicsOffsets'] else 'no'}",
         "layer stack (strongest first):",
@@ -100,5 +141,23 @@ def format_description(d: dict) -> str:
             lines.append(f"       STALE: {layer['staleReason']}")
         if layer["parameters"]:
             lines.append(f"       parameters: {json.dumps(layer['parameters'], sort_keys=True)}")
+        lines += [f"       malformed provenance: {problem}" for problem in layer["problems"]]
     lines += [f"  muted on disk: {asset}" for asset in d.get("mutedOnDisk", [])]
+    return "\n".join(lines)
+
+
+def _format_result_layer(path: str, layer: dict, timing: str) -> str:
+    """A result layer inspected on its own: what wrote it, from what, and where to look for the take."""
+    frames = f", frames {layer['frameRange'][0]:g}..{layer['frameRange'][1]:g}" if layer["frameRange"] else ""
+    lines = [
+        f"layer: {path}",
+        f"a {layer['role'] or 'facedyn'} layer written by {layer['processor'] or 'an unknown processor'}"
+        f"{' ' + layer['version'] if layer['version'] else ''} (run {layer['run'] or '-'}){frames}",
+        timing,
+        f"inputs: {', '.join(layer['inputs']) or '-'}",
+    ]
+    if layer["parameters"]:
+        lines.append(f"parameters: {json.dumps(layer['parameters'], sort_keys=True)}")
+    lines += [f"malformed provenance: {problem}" for problem in layer["problems"]]
+    lines.append("it overrides a face defined in another layer: inspect the take root that lists it (e.g. take.usda) for the composed take")
     return "\n".join(lines)

@@ -187,9 +187,15 @@ class RunRecord:
 
 def recorded_inputs(data: dict) -> list[dict]:
     """customLayerData["facedyn"]'s inputs as [{layer, run}] (run "" where an older layer kept none)."""
-    layers = [str(i) for i in data.get("inputs", [])]
-    runs = [str(r) for r in data.get("inputRuns", [])]
+    layers, runs = string_list(data.get("inputs", [])) or [], string_list(data.get("inputRuns", [])) or []
     return [{"layer": layer, "run": runs[k] if k < len(runs) else ""} for k, layer in enumerate(layers)]
+
+
+def string_list(value) -> list[str] | None:
+    """A metadata list (a list or a Vt array) as strings; None for anything else (malformed metadata)."""
+    if isinstance(value, (str, bytes, dict)) or not hasattr(value, "__iter__"):
+        return None
+    return [str(v) for v in value]
 
 
 def read_provenance(prim: Usd.Prim) -> list[dict]:

@@ -8,6 +8,8 @@ never reported stale. Everything is read from the files' metadata, nothing is co
 """
 from __future__ import annotations
 
+import math
+
 import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -101,10 +103,12 @@ def _status(entry: Entry, muted: bool, take: tuple[float, float] | None, reason:
 
 
 def frame_range(data: dict | None) -> tuple[float, float] | None:
-    if not data or "frameRange" not in data:
+    """The (first, last) frames a layer records; None when it records none or something malformed."""
+    try:
+        first, last = (float(f) for f in data["frameRange"])
+    except (TypeError, ValueError, KeyError):
         return None
-    first, last = list(data["frameRange"])
-    return float(first), float(last)
+    return (first, last) if math.isfinite(first) and math.isfinite(last) else None
 
 
 def take_frames(root_layer: Sdf.Layer, entries: list[Entry]) -> tuple[float, float] | None:

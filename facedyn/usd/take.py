@@ -20,6 +20,7 @@ from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import LEGACY_PROCESSOR_ROLES, is_take_root, layer_metadata, role_of
 from facedyn.usd.runs import IN_MEMORY, LayerInput, current_run
 from facedyn.usd.stage import get_prim, layer_name, open_stage
+from facedyn.usd.takechecks import frame_grid_problem, missing_keys_problem, orient_problem, units_problem
 from facedyn.usd.timing import Timing
 
 
@@ -90,7 +91,16 @@ def read_take_below(
 def read_stage(
     stage: Usd.Stage, path: Path, mesh: str | None = None, frames: tuple[float, float] | None = None
 ) -> tuple[Performance, TakeSource]:
-    """read_take on an open stage (e.g. one composed in memory); `path` names it in messages."""
+    """read_take on an open stage (e.g. one composed in memory); `path` names it in messages.
+
+    Refuses a take that is not in centimetres, Y up (takechecks.units_problem): facedyn's
+    layers copy the take's units, so converting here would leave results that disagree with
+    their root; `usdfacedyn import` converts a capture once instead.
+    """
+    timing = Timing.from_stage(stage)
+    problem = units_problem(timing.meters_per_unit, timing.up_axis)
+    if problem:
+        raise TakeError(f"{layer_name(stage)}: {problem}")
     mesh_prim = get_prim(stage, mesh) if mesh else find_face_mesh(stage)
     if not mesh_prim.IsA(UsdGeom.Mesh):
         raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()} is a {mesh_prim.GetTypeName() or 'typeless prim'}, expected a Mesh")
@@ -104,7 +114,7 @@ def read_stage(
         stage=stage,
         mesh_path=str(mesh_prim.GetPath()),
         skull_path=str(skull_prim.GetPath()) if skull_prim else None,
-        timing=Timing.from_stage(stage),
+        timing=timing,
         layer_identifiers=tuple(layer.identifier for layer in stage.GetLayerStack(includeSessionLayers=False)),
         inputs=read_inputs(stage),
     )
@@ -143,8 +153,14 @@ def find_animated_meshes(stage: Usd.Stage) -> list[Usd.Prim]:
     ]
 
 
-def select_time_codes(stage: Usd.Stage, mesh_prim: Usd.Prim, frames: tuple[float, float] | None) -> np.ndarray:
-    """The points' time samples, restricted to `frames` (first, last), as float64."""
+def select_time_codes(
+    stage: Usd.Stage, mesh_prim: Usd.Prim, frames: tuple[float, float] | None, whole_frames: bool = True
+) -> np.ndarray:
+    """The points' time samples, restricted to `frames` (first, last), as float64.
+
+    With `whole_frames` (every reader but a resampling import) they must be consecutive
+    whole frames at the stage's rate (takechecks.frame_grid_problem), else a TakeError.
+    """
     samples = np.asarray(UsdGeom.Mesh(mesh_prim).GetPointsAttr().GetTimeSamples(), dtype=np.float64)
     if samples.size == 0:
         raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()}.points has no time samples (not an animated mesh)")
@@ -153,6 +169,9 @@ def select_time_codes(stage: Usd.Stage, mesh_prim: Usd.Prim, frames: tuple[float
         samples = samples[(samples >= first) & (samples <= last)]
         if samples.size == 0:
             raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()} has no frames in {first:g}:{last:g}")
+    problem = frame_grid_problem(samples, stage.GetTimeCodesPerSecond()) if whole_frames else None
+    if problem:
+        raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()}.points: {problem}")
     return samples
 
 
@@ -241,21 +260,38 @@ def read_float_samples(attr: Usd.Attribute, time_codes: np.ndarray) -> np.ndarra
 
 
 def read_skull_transforms(skull_prim: Usd.Prim, time_codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-frame translate (F,3) and orient (F,4, w first) of the skull's translate/orient ops."""
-    translate_attr = skull_prim.GetAttribute("xformOp:translate")
-    orient_attr = skull_prim.GetAttribute("xformOp:orient")
+    """Per-frame translate (F,3) and orient (F,4, w first) of the skull's translate/orient ops.
+
+    An op that is absent is the identity and one with only a default value is constant; one
+    that is authored without any value, keyed on only some of the face's frames, non-finite,
+    or (orient) not a unit quaternion is a TakeError naming the file and the attribute.
+    """
+    where = f"{layer_name(skull_prim.GetStage())}: {skull_prim.GetPath()}"
+    translate = _skull_op_samples(skull_prim, "xformOp:translate", time_codes, where, lambda v: tuple(v))
+    orient = _skull_op_samples(skull_prim, "xformOp:orient", time_codes, where, _quat_wxyz)
     f = len(time_codes)
-    translate = np.zeros((f, 3))
-    orient = np.tile([1.0, 0.0, 0.0, 0.0], (f, 1))
-    if translate_attr and translate_attr.HasAuthoredValue():
-        query = Usd.AttributeQuery(translate_attr)
-        translate = np.array([query.Get(float(t)) for t in time_codes], dtype=np.float64)
-    if orient_attr and orient_attr.HasAuthoredValue():
-        query = Usd.AttributeQuery(orient_attr)
-        orient = np.array([_quat_wxyz(query.Get(float(t))) for t in time_codes], dtype=np.float64)
+    translate = np.zeros((f, 3)) if translate is None else translate
+    orient = np.tile([1.0, 0.0, 0.0, 0.0], (f, 1)) if orient is None else orient
     if not (np.isfinite(translate).all() and np.isfinite(orient).all()):
-        raise TakeError(f"{skull_prim.GetStage().GetRootLayer().realPath}: {skull_prim.GetPath()} has non-finite skull transforms")
+        raise TakeError(f"{where} has non-finite skull transforms")
+    problem = orient_problem(orient, time_codes)
+    if problem:
+        raise TakeError(f"{where}.{problem}")
     return translate, orient
+
+
+def _skull_op_samples(skull_prim: Usd.Prim, name: str, time_codes: np.ndarray, where: str, convert) -> np.ndarray | None:
+    """One skull op's per-frame values, None when the op is absent."""
+    attr = skull_prim.GetAttribute(name)
+    if not attr or not attr.IsAuthored():
+        return None
+    if not attr.HasAuthoredValue():
+        raise TakeError(f"{where}.{name} is authored but has no value (neither time samples nor a default)")
+    problem = missing_keys_problem(name, attr.GetTimeSamples(), time_codes) if attr.GetNumTimeSamples() else None
+    if problem:
+        raise TakeError(f"{where}.{problem}")
+    query = Usd.AttributeQuery(attr)
+    return np.array([convert(query.Get(float(t))) for t in time_codes], dtype=np.float64)
 
 
 def _quat_wxyz(q) -> tuple[float, float, float, float]:

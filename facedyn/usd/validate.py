@@ -20,8 +20,9 @@ from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import is_take_root
 from facedyn.usd.stackstatus import open_root, stack_status
-from facedyn.usd.stage import open_stage, resolve_asset_path
-from facedyn.usd.take import find_face_mesh
+from facedyn.usd.stage import layer_name, open_stage, resolve_asset_path
+from facedyn.usd.take import find_face_mesh, read_skull_transforms
+from facedyn.usd.takechecks import frame_grid_problem, units_problem
 
 # Validators about packaging that do not apply to plain layer files.
 _SKIPPED_USD_VALIDATORS = {"usdUtilsValidators:UsdzPackageValidator", "usdUtilsValidators:PackageEncapsulationValidator"}
@@ -32,19 +33,25 @@ class Finding:
     severity: str  # "error" or "warning"
     validator: str
     message: str
+    file: str = ""  # the layer or take the finding is about
+    prim: str = ""  # the prim (or property) path, "" for the file as a whole
 
 
 def validate_take(path: str | os.PathLike) -> list[Finding]:
+    """Every finding about the take at `path`, each naming its file (the take when no layer is more precise)."""
     stage = open_stage(path)
     findings = usd_findings(stage)
     if is_take_root(stage.GetRootLayer()):
         findings += stack_findings(Path(path))
+    findings += timing_findings(stage)
     try:
         face = find_face_mesh(stage)
     except TakeError as exc:
-        return findings + [Finding("error", "facedyn:FaceMesh", str(exc))]
-    findings += timing_findings(stage)
-    findings += face_findings(stage, face)
+        findings.append(Finding("error", "facedyn:FaceMesh", str(exc)))
+    else:
+        findings += face_findings(stage, face)
+    for finding in findings:
+        finding.file = finding.file or layer_name(stage)
     return findings
 
 
@@ -57,7 +64,11 @@ def usd_findings(stage: Usd.Stage) -> list[Finding]:
         if error.HasNoError():
             continue
         severity = "error" if error.GetType() == UsdValidation.ValidationErrorType.Error else "warning"
-        findings.append(Finding(severity, f"usd:{error.GetName()}", error.GetMessage()))
+        site = next(iter(error.GetSites()), None)
+        layer = site.GetLayer() if site is not None else None
+        prim = str(site.GetPrim().GetPath()) if site is not None and site.IsPrim() else ""
+        file = (layer.realPath or layer.identifier) if layer else ""
+        findings.append(Finding(severity, f"usd:{error.GetName()}", error.GetMessage(), file, prim))
     return findings
 
 
@@ -82,23 +93,30 @@ def stack_findings(root: Path) -> list[Finding]:
                                     f"whose role ranks higher; it would hide it (usdfacedyn layers can put them back in order)"))
     for i, s in enumerate(listed):
         if not s.exists:
-            findings.append(Finding("error", "facedyn:LayerStack", f"{root}: lists {s.asset}, which does not exist"))
+            findings.append(_layer_finding(s, "error", "facedyn:LayerStack", f"{root}: lists {s.asset}, which does not exist"))
         if not s.covers:
-            findings.append(Finding("error", "facedyn:FrameCoverage", f"{s.asset}: covers frames {s.frames[0]:g}..{s.frames[1]:g}, the take "
+            findings.append(_layer_finding(s, "error", "facedyn:FrameCoverage", f"{s.asset}: covers frames {s.frames[0]:g}..{s.frames[1]:g}, the take "
                                     f"{s.take_frames[0]:g}..{s.take_frames[1]:g}; the frames it lacks hold its nearest value"))
         needs = known[s.role].reads if s.role in known else None
         if needs and not any(below.role == needs for below in listed[i + 1 :]):
-            findings.append(Finding("error", "facedyn:LayerRequires", f"{s.asset}: a {s.role} layer needs a {needs} layer below it, and none is"))
+            findings.append(_layer_finding(s, "error", "facedyn:LayerRequires", f"{s.asset}: a {s.role} layer needs a {needs} layer below it, and none is"))
         if s.stale:
-            findings.append(Finding("warning", "facedyn:Stale", f"{s.asset}: stale, {s.reason}"))
+            findings.append(_layer_finding(s, "warning", "facedyn:Stale", f"{s.asset}: stale, {s.reason}"))
     return findings
 
 
+def _layer_finding(status, severity: str, validator: str, message: str) -> Finding:
+    return Finding(severity, validator, message, str(status.path))
+
+
 def timing_findings(stage: Usd.Stage) -> list[Finding]:
-    """Every layer that states a rate must state the root's rate."""
+    """The take is in centimetres, Y up, and every layer that states a rate states the root's rate."""
     root = stage.GetRootLayer()
     expected = (stage.GetTimeCodesPerSecond(), stage.GetFramesPerSecond())
     findings = []
+    problem = units_problem(UsdGeom.GetStageMetersPerUnit(stage), str(UsdGeom.GetStageUpAxis(stage)))
+    if problem:
+        findings.append(Finding("error", "facedyn:Units", problem, layer_name(stage)))
     for layer in stage.GetLayerStack(includeSessionLayers=False):
         if layer == root:
             continue
@@ -107,7 +125,8 @@ def timing_findings(stage: Usd.Stage) -> list[Finding]:
             ("framesPerSecond", layer.HasFramesPerSecond(), layer.framesPerSecond, expected[1]),
         ):
             if has and value != want:
-                findings.append(Finding("error", "facedyn:Timing", f"{layer.identifier}: {label} {value:g}, the take says {want:g}"))
+                findings.append(Finding("error", "facedyn:Timing", f"{layer.identifier}: {label} {value:g}, the take says {want:g}",
+                                        layer.realPath or layer.identifier))
     return findings
 
 
@@ -118,7 +137,10 @@ def face_findings(stage: Usd.Stage, face: Usd.Prim) -> list[Finding]:
     frames = points_attr.GetTimeSamples()
     findings = []
     if not frames:
-        return [Finding("error", "facedyn:Frames", f"{where}.points has no time samples")]
+        return [Finding("error", "facedyn:Frames", f"{where}.points has no time samples", prim=where)]
+    problem = frame_grid_problem(np.asarray(frames), stage.GetTimeCodesPerSecond())
+    if problem:
+        findings.append(Finding("error", "facedyn:Frames", f"{where}.points: {problem}", prim=where))
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
     indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
     if counts.sum() != indices.size:
@@ -156,23 +178,23 @@ def face_findings(stage: Usd.Stage, face: Usd.Prim) -> list[Finding]:
     if bad_offsets is not None:
         t, n_off, n_pts = bad_offsets
         findings.append(Finding("error", "facedyn:Offsets", f"{where}: {n_off} dynamicsOffset values for {n_pts} points at time {t:g}"))
+    for finding in findings:
+        finding.prim = finding.prim or where
     findings += skull_findings(face.GetParent(), frames)
     return findings
 
 
 def skull_findings(skull: Usd.Prim, frames: list[float]) -> list[Finding]:
-    """A skull that moves must be authored at every frame the face covers."""
+    """The skull's transform reads as the readers read it: a value at every frame of the face, unit quaternions."""
     if not skull.HasAPI(schema.SKULL_API):
         return []
     findings = []
-    for name in ("xformOp:translate", "xformOp:orient"):
-        attr = skull.GetAttribute(name)
-        samples = attr.GetTimeSamples() if attr else []
-        if samples:
-            missing = sorted(set(frames) - set(samples))
-            if missing:
-                findings.append(Finding("error", "facedyn:Skull", f"{skull.GetPath()}.{name}: not authored at {len(missing)} frame(s), first {missing[0]:g}"))
+    try:
+        read_skull_transforms(skull, np.asarray(frames, dtype=np.float64))
+    except TakeError as exc:
+        findings.append(Finding("error", "facedyn:Skull", str(exc), prim=str(skull.GetPath())))
     order = UsdGeom.Xformable(skull).GetXformOpOrderAttr().Get()
     if order is not None and [str(o) for o in order] != ["xformOp:translate", "xformOp:orient"]:
-        findings.append(Finding("warning", "facedyn:Skull", f"{skull.GetPath()}: xformOpOrder {list(order)} is not [translate, orient]"))
+        findings.append(Finding("warning", "facedyn:Skull", f"{skull.GetPath()}: xformOpOrder {list(order)} is not [translate, orient]",
+                                prim=str(skull.GetPath())))
     return findings

@@ -90,7 +90,7 @@ def test_mismatched_topology_or_frame_rate_is_refused(tmp_path):
     with pytest.raises(ModelMismatch) as err:
         load_model(path, topology=other)
     assert model.fingerprint in str(err.value) and other.fingerprint() in str(err.value)
-    with pytest.raises(ModelMismatch, match="trained at 120 fps.*runs at 96 fps"):
+    with pytest.raises(ModelMismatch, match="trained at 120 fps.*runs at 96 fps.*import CAPTURE --fps 120"):
         load_model(path, fps=96.0)
     assert issubclass(ModelMismatch, ValueError)
 
