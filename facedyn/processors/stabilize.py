@@ -55,9 +55,8 @@ class StabilizeProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.usd.take import read_take_below
-
         from facedyn.usd.rootedit import recorded_actor
+        from facedyn.usd.take import read_take_below
 
         path = single_input(request)
         perf, source = read_take_below(path, self.writes.role, frames=request.frames)
@@ -109,6 +108,12 @@ class StabilizeProcessor(Processor):
             "median_solve_error_cm": round(float(np.median(result.solve_error)), 5),
             "seconds": {k: round(v, 3) for k, v in result.timings.items()},
         }
+        if params["actor"] is not None:
+            summary["actor"] = str(params["actor"])
+        if result.model is not None:
+            summary["rigid_vertices"] = int(np.count_nonzero(result.model.weights >= 0.99))
+        if result.knot_spacing is not None:
+            summary["knot_spacing_s"] = round(result.knot_spacing, 5)
         if result.energy is not None:
             summary["final_energy"] = round(float(result.energy), 3)
             summary["backend"] = result.backend

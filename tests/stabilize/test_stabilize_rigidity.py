@@ -148,6 +148,7 @@ def test_an_actors_neutral_as_prior_is_still_checked_for_rigidity_per_take(rig, 
     take, tracked = talking
     result = stabilize(tracked.points, take.fps, prior=RigidModel.known(rig.neutral))
     np.testing.assert_allclose(result.rest, rig.neutral, atol=1e-6)
+    assert result.knot_spacing is not None and result.knot_spacing >= 1 / take.fps  # chosen for the take
     moving = np.linalg.norm(take.quasistatic - rig.neutral, axis=-1).max(axis=0) > 0.1
     assert moving.sum() > 20 and np.all(result.model.weights[moving] == 0)
     oracle = errors(rig, take, stabilize(tracked.points, take.fps, method="procrustes", rest=rig.neutral,
