@@ -160,6 +160,7 @@ class LayerOutput:
     define: bool = False
     summary: dict[str, Any] = field(default_factory=dict)
     root: Path | None = None  # a take root to create (or extend) with this layer as its base
+    actor: Path | None = None  # an actor asset to record in that take root (import --actor)
 
 
 @dataclass

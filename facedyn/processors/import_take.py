@@ -38,6 +38,8 @@ class ImportProcessor(Processor):
                   "onto whole frames (needed when its samples have gaps or fall between frames)", minimum=0.0, maximum=10000.0),
         Parameter("units", float, 1.0, "centimetres per unit of an OBJ sequence", above=0.0, maximum=1e6),
         Parameter("root", Path, None, "take root to create or extend (default: take.usda beside the output)", metavar="ROOT"),
+        Parameter("actor", Path, None, "the actor asset (usdfacedyn actor) the take belongs to, recorded in the take root: "
+                  "stabilize and the trainers then use it by default", metavar="ACTOR"),
     )
 
     def take_root(self, request: Request) -> Path:
@@ -66,6 +68,11 @@ class ImportProcessor(Processor):
         source, request, root, usd = plan.state
         output = _import_usd(source.paths[0], usd, request, progress) if source.kind == "usd" else _import_obj(source.paths, request, progress)
         output.root = root
+        if request.params["actor"] is not None:
+            from facedyn.usd.actor import read_actor_for
+
+            read_actor_for(request.params["actor"], output.layer.topology, source.paths[0])
+            output.actor = request.params["actor"]
         return output
 
 

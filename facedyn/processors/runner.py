@@ -132,7 +132,7 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
         raise UsageError(f"--frames {first:g}:{last:g} covers only part of {root}'s frames; attached, the layer would hold its "
                          "last sample over the rest of the take. Process the whole take, or leave out --attach")
     placed = attach_written_layer(root, request.output, processor.writes.role, write,
-                                  create_with=output.timing if output.define else None)
+                                  create_with=output.timing if output.define else None, actor=output.actor)
     report.update(root=str(root), sublayers=placed.sublayers, stale=placed.stale)
     return report
 

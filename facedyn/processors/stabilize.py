@@ -41,8 +41,9 @@ class StabilizeProcessor(Processor):
         Parameter("method", str, "mode-pursuit", "mode-pursuit, or a baseline: three-point, procrustes, icp", METHODS),
         Parameter("solver", str, "fast", "mode pursuit's solver: fast, or reference (the paper's PyTorch formulation)", ("fast", "reference")),
         Parameter("init", str, "icp", "mode pursuit's initial alignment", ("identity", "three-point", "procrustes", "icp")),
-        Parameter("actor", Path, None, "an actor asset (usdfacedyn actor): solve against its neutral and rigid region, "
-                  "so the take lands in the actor's one skull frame", metavar="ACTOR"),
+        Parameter("actor", Path, None, "an actor asset (usdfacedyn actor; default: the one import --actor recorded in the "
+                  "take root): its neutral and rigid region are the solve's prior, so the take lands in the actor's skull frame",
+                  metavar="ACTOR"),
         Parameter("iterations", int, 12, "L-BFGS iterations per stage (the paper uses 12 or 24)", minimum=1, maximum=1000),
         Parameter("rest", str, "take", "rest mesh: the take's rest points (take), or estimated from the data (estimate)", ("take", "estimate")),
         Parameter("mask", str, "rigid", "vertices the solve uses: the take's rigid-region weights (rigid), or all", ("rigid", "all")),
@@ -54,22 +55,29 @@ class StabilizeProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
+        from facedyn.usd.rootedit import recorded_actor
         from facedyn.usd.take import read_take_below
 
         path = single_input(request)
         perf, source = read_take_below(path, self.writes.role, frames=request.frames)
-        params = request.params
+        params = dict(request.params)
+        if params["actor"] is None:
+            params["actor"] = recorded_actor(path)
+        prior = None
         if params["actor"] is not None:
-            perf = with_actor(perf, params["actor"])
+            perf, prior = with_actor(perf, params["actor"], path, params)
         weights, rest, three_point = _solve_inputs(perf, params)
+        if prior is not None:
+            weights = None  # found on this take within the actor's rigid region
+        solve_weights = prior.weights if prior is not None else weights
         description = {
             "take": str(path), "frames": perf.frame_count, "points": perf.point_count, "method": params["method"],
-            "solve_vertices": int(np.count_nonzero(weights)) if weights is not None else perf.point_count,
-            "rest": "estimated from the data" if rest is None else f"the actor's neutral ({params['actor']})" if params["actor"]
+            "solve_vertices": int(np.count_nonzero(solve_weights)) if solve_weights is not None else perf.point_count,
+            "rest": f"the actor's neutral ({params['actor']})" if prior is not None else "estimated from the data" if rest is None
             else "the take's rest points",
             "three_point": three_point,
         }
-        return Plan(description, (perf, source, params, weights, rest, three_point))
+        return Plan(description, (perf, source, params, weights, rest, three_point, prior))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.stabilize.api import stabilize
@@ -77,15 +85,16 @@ class StabilizeProcessor(Processor):
         from facedyn.usd import schema
         from facedyn.usd.layers import LayerContent
 
-        perf, source, params, weights, rest, three_point = plan.state
-        discovering = weights is None and rest is None and params["method"] == "mode-pursuit"
-        # A plain capture (no mask, no rest): the rigid mode is discovered first, then solved on the locked fine schedule.
+        perf, source, params, weights, rest, three_point, prior = plan.state
+        discovering = weights is None and (rest is None or prior is not None) and params["method"] == "mode-pursuit"
+        # A plain capture (no mask, no rest) or an actor's take: the rigid mode is discovered first (from the data, or
+        # checked against the actor's), then solved on the locked fine schedule.
         make = Schedule.locked if discovering else Schedule
         schedule = make(iterations=params["iterations"], reference_fps=params["reference_fps"])
         progress.start(f"stabilize ({params['method']})", 1)
         result = stabilize(
             perf.world_points(), perf.fps, method=params["method"], solver=params["solver"], rest=rest, weights=weights,
-            init=params["init"], three_point=three_point, schedule=schedule, backend=params["backend"],
+            prior=prior, init=params["init"], three_point=three_point, schedule=schedule, backend=params["backend"],
         )
         progress.finish()
         layer = LayerContent(
@@ -99,23 +108,34 @@ class StabilizeProcessor(Processor):
             "median_solve_error_cm": round(float(np.median(result.solve_error)), 5),
             "seconds": {k: round(v, 3) for k, v in result.timings.items()},
         }
+        if params["actor"] is not None:
+            summary["actor"] = str(params["actor"])
+        if result.model is not None:
+            summary["rigid_vertices"] = int(np.count_nonzero(result.model.weights >= 0.99))
+        if result.knot_spacing is not None:
+            summary["knot_spacing_s"] = round(result.knot_spacing, 5)
         if result.energy is not None:
             summary["final_energy"] = round(float(result.energy), 3)
             summary["backend"] = result.backend
         return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.inputs), summary=summary)
 
 
-def with_actor(perf, actor_path: Path):
-    """The take with the actor's neutral as its rest and the actor's face setup (same topology required)."""
-    from facedyn.usd.actor import read_actor
-    from facedyn.usd.errors import TakeError
+def with_actor(perf, actor_path: Path, take: Path, params: dict):
+    """The take with the actor's face setup, and the rigid prior to solve it with: the actor's neutral (the skull
+    frame, kept as the rest) and its rigid weights (all vertices with --mask all), which the take's own data still
+    checks (facedyn.stabilize.rigidity). Same topology required."""
+    from facedyn.stabilize.rigidity import RigidModel
+    from facedyn.usd.actor import read_actor_for
 
-    actor = read_actor(actor_path)
-    if actor.topology.fingerprint() != perf.topology.fingerprint():
-        raise TakeError(f"{actor_path}: the actor's mesh topology ({actor.topology.point_count} points) differs from the take's "
-                        f"({perf.point_count} points); an actor applies to takes tracked on its own mesh")
-    return perf.with_changes(rest_points=actor.neutral, rigid_weights=actor.rigid_weights, face_vertices=actor.face_vertices,
+    if params["rest"] == "estimate":
+        raise UsageError("an actor fixes the rest mesh (its neutral defines the skull frame); leave out --rest estimate")
+    actor = read_actor_for(actor_path, perf.topology, take)
+    perf = perf.with_changes(rest_points=actor.neutral, rigid_weights=actor.rigid_weights, face_vertices=actor.face_vertices,
                              skin_samples=actor.skin_samples, alignment_vertices=actor.alignment_vertices, landmarks=actor.landmarks)
+    prior = None
+    if params["method"] == "mode-pursuit":
+        prior = RigidModel.known(actor.neutral, actor.rigid_weights if params["mask"] == "rigid" else None)
+    return perf, prior
 
 
 def _actor_setup(perf, params) -> dict:
@@ -130,8 +150,6 @@ def _solve_inputs(perf, params):
     """Solve weights, rest mesh and three-point vertices from the take and the parameters."""
     from facedyn.usd.errors import TakeError
 
-    if params["actor"] is not None and params["rest"] == "estimate":
-        raise UsageError("--actor fixes the rest mesh (the actor's neutral defines the skull frame); leave out --rest estimate")
     weights = None
     if params["mask"] == "rigid" and perf.rigid_weights is not None and np.count_nonzero(perf.rigid_weights) >= 3:
         weights = perf.rigid_weights.astype(np.float64)

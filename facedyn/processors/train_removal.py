@@ -10,8 +10,8 @@ from functools import partial
 
 from facedyn.errors import UsageError
 from facedyn.processors.base import FileOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths,
-                                                 training_skull_frame, validation_names)
+from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths, training_face,
+                                                 validation_names)
 from facedyn.progress import Progress
 
 
@@ -40,19 +40,18 @@ class TrainRemovalProcessor(Processor):
                              "which a solved skull matches only up to an unknown rigid transform")
         takes = load_takes(request.inputs, params, Progress.silent())
         truths = read_truths(request.inputs, [name for name, _ in takes]) if params["target"] == "truth" else None
+        face, frame = training_face(request.inputs, params, takes)
         description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes), "target": params["target"],
-                       "skull": params["skull"], "epochs": params["epochs"]}
-        return Plan(description, (request, takes, truths))
+                       "skull": params["skull"], "epochs": params["epochs"], "actor": frame.get("actor")}
+        return Plan(description, (request, takes, truths, face, frame))
 
     def run(self, plan: Plan, progress: Progress) -> FileOutput:
-        from facedyn.dynamics.face import FaceSetup
         from facedyn.dynamics.modelfile import save_model
         from facedyn.dynamics.skull_motion import NAMED
         from facedyn.dynamics.training import Take, TrainConfig, train_removal
 
-        request, takes, truths = plan.state
+        request, takes, truths, face, frame = plan.state
         params = request.params
-        face = FaceSetup.from_performance(takes[0][1], sample_count=params["samples"])
         config = TrainConfig(epochs=params["epochs"], subsample=params["subsample"], validation=validation_names(params),
                              seed=params["seed"], device=params["device"], target=params["target"],
                              skull_motion=NAMED[params["skull_features"]] if params["skull_features"] == "acceleration" else None)
@@ -62,7 +61,7 @@ class TrainRemovalProcessor(Processor):
         on_epoch, last = epoch_reporter(progress, f"train F ({len(takes)} takes)", config.epochs)
         model = train_removal(training, face, config, on_epoch, backend=params["backend"])
         progress.finish()
-        model.info["skull_frame"] = training_skull_frame(takes)
+        model.info.update(frame)
         model.info["training"]["skull"] = params["skull"]
         model.info["training"]["inputs"] = [str(p) for p in request.inputs]
         return FileOutput(partial(save_model, model), training_summary(model, takes, face, last))

@@ -13,8 +13,8 @@ from functools import partial
 
 from facedyn.processors.base import FileOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.processors.train_removal import training_summary
-from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths,
-                                                 training_skull_frame, validation_names)
+from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths, training_face,
+                                                 validation_names)
 from facedyn.progress import Progress
 
 
@@ -35,7 +35,6 @@ class TrainSynthesisProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.dynamics.face import FaceSetup
         from facedyn.dynamics.modelfile import load_model
         from facedyn.usd.errors import TakeError
 
@@ -44,18 +43,22 @@ class TrainSynthesisProcessor(Processor):
         first = takes[0][1]
         if first.uvs is None:
             raise TakeError(f"{request.inputs[0]}: the takes have no uvs (primvars:st); stretch features need them")
+        face, frame = training_face(request.inputs, params, takes)
         if params["quasistatic"] == "truth":
             truths = read_truths(request.inputs, [name for name, _ in takes])
             quasistatic = {name: truth.points for name, truth in truths.items()}
-            face = FaceSetup.from_performance(first, sample_count=params["samples"])
         else:
             quasistatic = load_model(params["quasistatic"], topology=first.topology, fps=first.fps)
             if quasistatic.kind != "removal":
                 raise TakeError(f"{params['quasistatic']}: a {quasistatic.kind} model; --quasistatic needs a removal model or 'truth'")
+            if quasistatic.info.get("skull_frame") not in (None, frame["skull_frame"]):
+                raise TakeError(f"{params['quasistatic']}: the removal model was trained in another skull frame than these takes'; "
+                                "train F and H on takes of one actor")
             face = quasistatic.face  # H uses F's samples and landmarks
         description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes),
-                       "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": params["epochs"]}
-        return Plan(description, (request, takes, quasistatic, face))
+                       "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": params["epochs"],
+                       "actor": frame.get("actor")}
+        return Plan(description, (request, takes, quasistatic, face, frame))
 
     def run(self, plan: Plan, progress: Progress) -> FileOutput:
         from facedyn.dynamics.modelfile import save_model
@@ -63,7 +66,7 @@ class TrainSynthesisProcessor(Processor):
         from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
         from facedyn.dynamics.training import Take
 
-        request, takes, quasistatic, face = plan.state
+        request, takes, quasistatic, face, frame = plan.state
         params = request.params
         config = synthesis_config(epochs=params["epochs"], validation=validation_names(params), seed=params["seed"],
                                   device=params["device"], skull_motion=NAMED[params["skull_features"]])
@@ -71,6 +74,6 @@ class TrainSynthesisProcessor(Processor):
         model = train_synthesis([Take.from_performance(perf, name) for name, perf in takes], face, takes[0][1].uvs,
                                 quasistatic, config, on_epoch, backend=params["backend"])
         progress.finish()
-        model.info["skull_frame"] = training_skull_frame(takes)
+        model.info.update(frame)
         model.info["training"].update(skull=params["skull"], inputs=[str(p) for p in request.inputs], quasistatic=params["quasistatic"])
         return FileOutput(partial(save_model, model), {**training_summary(model, takes, face, last), "quasistatic": params["quasistatic"]})

@@ -18,6 +18,8 @@ TRAINING_PARAMETERS = (
     Parameter("seed", int, 0, "seed of the network's initialization and the epochs' sampling", minimum=0, maximum=2**32 - 1),
     Parameter("device", str, "auto", "torch device: auto, cpu, cuda, cuda:N", check=check_device),
     Parameter("backend", str, "auto", "feature and stretch kernels", BACKENDS),
+    Parameter("actor", Path, None, "the actor asset whose skin samples, landmarks and rigid region the model uses (default: "
+              "the one the takes' roots record, else the first take's own)", metavar="ACTOR"),
 )
 
 
@@ -65,6 +67,47 @@ def training_skull_frame(takes: list) -> str | None:
         raise TakeError(f"the training takes are in {len(distinct)} different skull frames ({listing}); stabilize every take "
                         "of the actor with --actor ACTOR so they share one")
     return distinct[0]
+
+
+def training_face(inputs: list[Path], params: dict, takes: list):
+    """(the face setup the model is trained with, what the model records about its frame).
+
+    The actor's (--actor, or the one the takes' roots record) when there is one: its skin
+    samples, landmarks and rigid region, with every take checked to be in its skull frame,
+    so a model does not depend on which take is listed first. Else the first take's own.
+    """
+    from facedyn.dynamics.face import FaceSetup
+    from facedyn.usd.actor import read_actor_for
+    from facedyn.usd.errors import TakeError
+
+    frame = training_skull_frame(takes)
+    path = params["actor"] or recorded_training_actor(inputs)
+    if path is None:
+        return FaceSetup.from_performance(takes[0][1], sample_count=params["samples"]), {"skull_frame": frame}
+    actor = read_actor_for(path, takes[0][1].topology, takes[0][0])
+    if frame != actor.skull_frame:
+        raise TakeError(f"{path}: the training takes are not in the actor {actor.name}'s skull frame; stabilize every take "
+                        f"with --actor {path} (or import it with --actor) first")
+    face = FaceSetup.build(actor.topology, actor.neutral, rigid_weights=actor.rigid_weights, face_vertices=actor.face_vertices,
+                           samples=actor.skin_samples, landmarks=actor.landmarks, sample_count=params["samples"], uvs=actor.uvs)
+    return face, {"skull_frame": frame, "actor": actor.name}
+
+
+def recorded_training_actor(inputs: list[Path]) -> Path | None:
+    """The one actor the training takes' roots record (import --actor), or None; two actors are an error."""
+    from facedyn.usd.errors import TakeError
+    from facedyn.usd.rootedit import recorded_actor
+    from facedyn.usd.training_data import take_roots
+
+    found = {}
+    for root in take_roots(inputs):
+        actor = recorded_actor(root / "take.usda" if root.is_dir() else root)
+        if actor is not None:
+            found.setdefault(actor, take_name(root))
+    if len(found) > 1:
+        listing = ", ".join(f"{name}: {path}" for path, name in found.items())
+        raise TakeError(f"the training takes record {len(found)} different actors ({listing}); a model is trained for one actor")
+    return next(iter(found), None)
 
 
 def take_skull_frame(perf) -> str | None:

@@ -10,7 +10,7 @@ actor keeps so that its later takes start from it.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -19,6 +19,7 @@ from facedyn.stabilize import baselines
 from facedyn.stabilize import rest as rest_estimate
 from facedyn.stabilize.dropped import bridge_dropped, tracked_frames
 from facedyn.stabilize.fast import FastSolver
+from facedyn.stabilize.knots import choose_knot_spacing
 from facedyn.stabilize.modepursuit import StageRecord, mode_pursuit
 from facedyn.stabilize.rigidity import RigidModel, estimate_rigidity
 from facedyn.stabilize.schedule import Schedule
@@ -43,6 +44,7 @@ class StabilizeResult:
     timings: dict[str, float] = field(default_factory=dict)
     model: RigidModel | None = None  # mode pursuit: the weights and rest it solved with (an actor's prior)
     tracked: np.ndarray | None = None  # (F,) bool: False on dropped frames (bridged, facedyn.stabilize.dropped)
+    knot_spacing: float | None = None  # mode pursuit: seconds between the final spline's knots
 
 
 def _check_inputs(world, fps, rest, weights):
@@ -175,6 +177,10 @@ def stabilize(
         t0 = time.perf_counter()
         rest = _estimate_rest(world, rot, trans, schedule.widths_pos[-1])
         timings["init"] += time.perf_counter() - t0
+    if schedule.knot_spacing is None:
+        t0 = time.perf_counter()
+        schedule = replace(schedule, knot_spacing=choose_knot_spacing(rot, trans, fps, rest[active]))
+        timings["knots"] = time.perf_counter() - t0
     if solver == "fast":
         stage_solver = FastSolver(backend)
     else:
@@ -202,6 +208,7 @@ def stabilize(
     result.model = RigidModel(final_weights, rest, spread, model.noise_cm if model is not None else 0.0)
     result.tracked = tracked
     result.energy = out.energy
+    result.knot_spacing = schedule.knot_spacing
     result.backend = getattr(stage_solver, "used_backend", None)
     result.history = out.history
     result.timings["total"] = time.perf_counter() - t_total

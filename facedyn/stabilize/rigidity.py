@@ -80,6 +80,14 @@ class RigidModel:
         if not np.all(np.isfinite(self.rest)):
             raise ValueError("rigid model rest holds non-finite values")
 
+    @classmethod
+    def known(cls, rest: np.ndarray, weights: np.ndarray | None = None) -> "RigidModel":
+        """A prior from what an actor already knows: its neutral (the skull frame) and its
+        rigid weights (every vertex where it has none), with no spread measured yet."""
+        rest = np.asarray(rest, dtype=np.float64)
+        weights = np.ones(len(rest)) if weights is None else weights
+        return cls(weights, rest, np.zeros(len(rest)), 0.0)
+
     def merge(self, other: "RigidModel") -> "RigidModel":
         """This model and one found on another take of the actor in the same skull frame
         (solved with this one as its prior): rigid where both are, the rest averaged over

@@ -39,7 +39,7 @@ class Schedule:
     widths_vel: tuple[float, ...] = (0.2, 0.1, 0.05, 0.025, 0.0125)
     reference_fps: float = REFERENCE_FPS
     iterations: int = 12
-    knot_spacing: float = 1.0 / 80.0
+    knot_spacing: float | None = 1.0 / 80.0  # None: chosen per take (facedyn.stabilize.knots)
     refinements: int = 2
 
     def __post_init__(self) -> None:
@@ -53,8 +53,8 @@ class Schedule:
             raise ValueError(f"reference_fps must be positive, got {self.reference_fps}")
         if self.iterations < 1:
             raise ValueError(f"iterations per stage must be >= 1, got {self.iterations}")
-        if not self.knot_spacing > 0:
-            raise ValueError(f"knot_spacing must be positive seconds, got {self.knot_spacing}")
+        if self.knot_spacing is not None and not self.knot_spacing > 0:
+            raise ValueError(f"knot_spacing must be positive seconds (or None: chosen per take), got {self.knot_spacing}")
         if not 0 <= self.refinements < len(self.widths_pos):
             raise ValueError(f"refinements must be in [0, {len(self.widths_pos) - 1}], got {self.refinements}")
 
@@ -62,13 +62,14 @@ class Schedule:
     def locked(cls, iterations: int = 12, reference_fps: float = REFERENCE_FPS) -> "Schedule":
         """The schedule once the initial alignment is locked on the rigid mode (rigidity
         discovered, or an actor's prior): no coarse widths or coarse splines to find the
-        mode again, only the three finest widths on the final spline, whose knots every
-        1/40 s smooth the tracking noise out of the skull's accelerations (the networks'
-        input) and still follow real mocap head turns (benchmarks/bench_stabilize_accuracy.py).
+        mode again, only the three finest widths on the final spline, whose knot spacing
+        is chosen per take from the initial alignment (facedyn.stabilize.knots): every
+        3 frames on a walk or dialog at 120 fps, smoothing the tracking noise out of the
+        skull's accelerations (the networks' input), every frame on a run at 60 fps.
         Starting over from 0.8 cm and a 4x coarser spline there moved the solve away from
         the alignment it started from and left 3-4x the error after 12 iterations a stage."""
         return cls(widths_pos=(0.2, 0.1, 0.05), widths_vel=(0.05, 0.025, 0.0125), reference_fps=reference_fps,
-                   iterations=iterations, knot_spacing=1.0 / 40.0, refinements=0)
+                   iterations=iterations, knot_spacing=None, refinements=0)
 
     def stages(self) -> list[Stage]:
         return [

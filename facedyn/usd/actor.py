@@ -68,6 +68,15 @@ def is_actor(path: str | os.PathLike) -> bool:
     return isinstance(data, dict) and data.get("role") == ACTOR_ROLE
 
 
+def read_actor_for(path: str | os.PathLike, topology, take: str | os.PathLike) -> Actor:
+    """The actor in an actor asset, checked to apply to `take` (tracked on the same mesh)."""
+    actor = read_actor(path)
+    if actor.topology.fingerprint() != topology.fingerprint():
+        raise TakeError(f"{path}: the actor's mesh topology ({actor.topology.point_count} points) differs from {take}'s "
+                        f"({topology.point_count} points); an actor applies to takes tracked on its own mesh")
+    return actor
+
+
 def read_actor(path: str | os.PathLike) -> Actor:
     """The actor in an actor asset, or a TakeError naming the file and what is missing."""
     stage = open_stage(path)

@@ -8,6 +8,8 @@ place (`export_atomically`), so a reader never sees half a file.
 
 Muting on disk takes a layer out of subLayers and remembers it in the root's
 customLayerData["facedyn"]["muted"], so that `unmute` can put it back at its role's place.
+The actor a take belongs to (`import --actor`) is kept there too, as customLayerData
+["facedyn"]["actor"]: an asset path relative to the root, read back by `recorded_actor`.
 """
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ from facedyn.usd.stage import relative_asset_path, resolve_asset_path
 from facedyn.usd.timing import Timing
 
 LOCK_MODE = 0o644
+ACTOR_KEY = "actor"  # root customLayerData["facedyn"][ACTOR_KEY]: the take's actor asset, relative to the root
 
 
 @contextmanager
@@ -88,11 +91,13 @@ def attach(root: str | os.PathLike, layer_path: str | os.PathLike, role_name: st
 
 
 def attach_written_layer(root: str | os.PathLike, layer_path: str | os.PathLike, role_name: str,
-                         write: Callable[[], object], create_with: Timing | None = None) -> AttachReport:
+                         write: Callable[[], object], create_with: Timing | None = None,
+                         actor: str | os.PathLike | None = None) -> AttachReport:
     """Lock root, check it can be edited, `write()` the layer, attach it, unlock.
 
     If anything after the write fails, a layer that did not exist before is removed again,
-    so a failed attach leaves no orphan behind.
+    so a failed attach leaves no orphan behind. `actor` (an actor asset) is recorded in the
+    root in the same edit.
     """
     root, layer_path = Path(root), Path(layer_path)
     existed = layer_path.exists()
@@ -103,7 +108,7 @@ def attach_written_layer(root: str | os.PathLike, layer_path: str | os.PathLike,
             check_writable(root)
         write()
         try:
-            return _attach(root, layer_path, role_name, create_with)
+            return _attach(root, layer_path, role_name, create_with, actor)
         except BaseException:
             if not existed:
                 layer_path.unlink(missing_ok=True)
@@ -119,7 +124,8 @@ def _check_editable(root: Path) -> Sdf.Layer:
     return layer
 
 
-def _attach(root: Path, layer_path: Path, role_name: str | None, create_with: Timing | None) -> AttachReport:
+def _attach(root: Path, layer_path: Path, role_name: str | None, create_with: Timing | None,
+            actor: str | os.PathLike | None = None) -> AttachReport:
     if layer_path.resolve() == root.resolve():
         raise UsageError(f"{layer_path}: a take root cannot list itself")
     if not layer_path.is_file():
@@ -154,6 +160,8 @@ def _attach(root: Path, layer_path: Path, role_name: str | None, create_with: Ti
     placed, replaced = place(entries, new)
     layer.subLayerPaths = [e.asset for e in placed]
     _set_muted(layer, [a for a in muted_assets(layer) if resolve_asset_path(a, root.parent) != new.path])
+    if actor is not None:
+        _set_facedyn_entry(layer, ACTOR_KEY, relative_asset_path(actor, root.parent))
     export_atomically(layer, root)
     above = {e.asset for e in placed[: placed.index(new)]}
     stale = [s.asset for s in stack_status(root) if s.asset in above and s.stale]
@@ -180,14 +188,33 @@ def _check_no_cycle(root: Path, layer_path: Path) -> None:
 
 
 def _set_muted(layer: Sdf.Layer, assets: list[str]) -> None:
+    _set_facedyn_entry(layer, MUTED_KEY, Vt.StringArray(assets) if assets else None)
+
+
+def _set_facedyn_entry(layer: Sdf.Layer, key: str, value) -> None:
+    """Set (or, with None, remove) one entry of the root's customLayerData["facedyn"]."""
     data = dict(layer.customLayerData)
     facedyn = dict(data.get("facedyn", {}))
-    if assets:
-        facedyn[MUTED_KEY] = Vt.StringArray(assets)
+    if value is None:
+        facedyn.pop(key, None)
     else:
-        facedyn.pop(MUTED_KEY, None)
+        facedyn[key] = value
     data["facedyn"] = facedyn
     layer.customLayerData = data
+
+
+def recorded_actor(root: str | os.PathLike) -> Path | None:
+    """The actor asset recorded in a take root (`import --actor`), or None; a recorded asset
+    that is gone is an error naming both files."""
+    root = Path(root)
+    data = dict(open_root(root).customLayerData).get("facedyn")
+    asset = data.get(ACTOR_KEY) if isinstance(data, dict) else None
+    if not asset:
+        return None
+    path = resolve_asset_path(str(asset), root.parent)
+    if not path.is_file():
+        raise TakeError(f"{root}: records the actor {asset}, which does not exist ({path}); re-import with --actor ACTOR")
+    return path
 
 
 @contextmanager

@@ -100,3 +100,62 @@ def test_actor_from_takes_finds_the_rigid_region_and_one_frame(rig_and_takes, tm
     truly_rigid = rig.rigid_weights >= 0.99
     # most of what it calls rigid is rigid, and it finds a good share of the truly rigid vertices
     assert np.mean(truly_rigid[found_rigid]) > 0.8 and np.mean(found_rigid[truly_rigid]) > 0.3
+
+
+def import_with_actor(cache, shot, actor):
+    shot.mkdir()
+    assert cli("import", cache, "-o", shot / "capture.usdc", "--actor", actor) == 0
+    return shot / "take.usda"
+
+
+def test_import_records_the_actor_and_stabilize_and_the_trainers_use_it(rig_and_takes, tmp_path):
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.performance import skull_frame_id
+    from facedyn.usd.rootedit import recorded_actor
+    from facedyn.usd.stackstatus import open_root
+
+    _, rig, rig_path, caches = rig_and_takes
+    assert cli("actor", rig_path, "-o", tmp_path / "actors" / "ada.usda") == 0
+    actor = read_actor(tmp_path / "actors" / "ada.usda")
+    roots = []
+    for motion, (cache, take) in caches.items():
+        root = import_with_actor(cache, tmp_path / motion, tmp_path / "actors" / "ada.usda")
+        assert dict(open_root(root).customLayerData)["facedyn"]["actor"] == "../actors/ada.usda"  # relative: moves with the shots
+        assert recorded_actor(root) == (tmp_path / "actors" / "ada.usda").resolve()
+        assert cli("stabilize", root, "-o", root.parent / "stabilized.usdc", "--attach", root) == 0  # no --actor: the recorded one
+        perf, _ = read_take(root)
+        assert skull_frame_id(perf.rest_points, perf.topology) == actor.skull_frame
+        np.testing.assert_array_equal(perf.skin_samples, actor.skin_samples)
+        error = np.linalg.norm(perf.points - (take.quasistatic + take.offsets), axis=-1)[:, rig.face_vertices]
+        assert np.median(error) < 0.01, np.median(error)
+        roots.append(root)
+    # The model takes the actor's samples and landmarks whichever take comes first, and records the actor and its frame.
+    for order, model_path in ((roots, tmp_path / "a.removal"), (roots[::-1], tmp_path / "b.removal")):
+        assert cli("train-removal", *order, "-o", model_path, "--epochs", "1", "--validation", "walk") == 0
+    a, b = load_model(tmp_path / "a.removal"), load_model(tmp_path / "b.removal")
+    assert a.info["actor"] == "ada" and a.info["skull_frame"] == actor.skull_frame
+    np.testing.assert_array_equal(a.face.samples, actor.skin_samples)
+    np.testing.assert_array_equal(b.face.samples, a.face.samples)
+    np.testing.assert_allclose(a.face.landmarks, actor.landmarks, atol=1e-6)
+
+
+def test_actor_errors_name_the_files(rig_and_takes, tmp_path, capsys):
+    _, rig, rig_path, caches = rig_and_takes
+    other = write_blendshape_rig(default_face(6), tmp_path / "other_rig.usda")
+    assert cli("actor", other, "-o", tmp_path / "other.usda") == 0
+    tmp_path.joinpath("shot").mkdir()
+    # an actor of another mesh is refused at import, and nothing is written
+    assert cli("import", caches["walk"][0], "-o", tmp_path / "shot" / "capture.usdc", "--actor", tmp_path / "other.usda") == 1
+    assert not (tmp_path / "shot" / "take.usda").exists()
+    assert cli("actor", rig_path, "-o", tmp_path / "ada.usda") == 0
+    root = import_with_actor(caches["walk"][0], tmp_path / "walk", tmp_path / "ada.usda")
+    assert cli("stabilize", root, "-o", tmp_path / "walk" / "s.usdc", "--attach", root, "--mask", "all") == 0
+    assert cli("stabilize", root, "-o", tmp_path / "walk" / "s.usdc", "--attach", root, "--rest", "estimate") == 2
+    # the trainers refuse an actor whose skull frame the takes are not in (here: the walk's own first frame)
+    assert cli("actor", caches["walk"][0], "--from", "neutral", "-o", tmp_path / "first_frame.usda") == 0
+    capsys.readouterr()
+    assert cli("train-removal", root, "-o", tmp_path / "f.removal", "--epochs", "1", "--actor", tmp_path / "first_frame.usda") == 1
+    assert "the training takes are not in the actor first_frame's skull frame" in capsys.readouterr().err
+    (tmp_path / "ada.usda").rename(tmp_path / "moved.usda")
+    assert cli("stabilize", root, "-o", tmp_path / "walk" / "s.usdc") == 1  # the recorded actor is gone
+    assert "records the actor ../ada.usda, which does not exist" in capsys.readouterr().err

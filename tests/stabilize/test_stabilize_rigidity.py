@@ -140,3 +140,17 @@ def test_tracker_noise_components_are_seeded_and_shaped(rig):
     np.testing.assert_array_equal(out, again)
     with pytest.raises(ValueError, match="drop_mode"):
         TrackerNoise(drop_mode="hold")
+
+
+def test_an_actors_neutral_as_prior_is_still_checked_for_rigidity_per_take(rig, talking):
+    """An actor that knows only its neutral (every vertex a candidate): the take keeps the neutral as its rest (the
+    actor's skull frame) and its own data rules out the vertices that move (the jaw opening and closing)."""
+    take, tracked = talking
+    result = stabilize(tracked.points, take.fps, prior=RigidModel.known(rig.neutral))
+    np.testing.assert_allclose(result.rest, rig.neutral, atol=1e-6)
+    assert result.knot_spacing is not None and result.knot_spacing >= 1 / take.fps  # chosen for the take
+    moving = np.linalg.norm(take.quasistatic - rig.neutral, axis=-1).max(axis=0) > 0.1
+    assert moving.sum() > 20 and np.all(result.model.weights[moving] == 0)
+    oracle = errors(rig, take, stabilize(tracked.points, take.fps, method="procrustes", rest=rig.neutral,
+                                          weights=(rig.rigid_weights == 1).astype(float)))
+    assert errors(rig, take, result)["median_vertex_cm"] <= 1.5 * oracle["median_vertex_cm"]
