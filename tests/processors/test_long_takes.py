@@ -142,3 +142,34 @@ def test_a_write_sweeps_temporaries_of_dead_writers_only(tmp_path):
     finally:
         live.kill()
         live.wait()
+
+
+def test_streamed_remove_and_synthesize_equal_the_whole_take(take, tmp_path, monkeypatch):
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.dynamics.removal import remove_dynamics
+    from facedyn.dynamics.synthesis import synthesize_dynamics
+    from facedyn.processors import remove, synthesize
+
+    corpus = take.parent
+    models = tmp_path / "models"
+    root = take / "take.usda"
+    assert main(["train-removal", str(corpus), "-o", str(models / "f.removal"), "--skull", "truth", "--epochs", "1",
+                 "--samples", "32", "--json"]) == 0
+    assert main(["train-synthesis", str(corpus), "-o", str(models / "h.synthesis"), "--quasistatic", str(models / "f.removal"),
+                 "--skull", "truth", "--epochs", "1", "--json"]) == 0
+    assert cli("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root) == 0
+    monkeypatch.setattr(remove, "CHUNK_FRAMES", 100)  # 360 frames: four chunks, each with context on both sides
+    monkeypatch.setattr(synthesize, "CHUNK_FRAMES", 100)
+    stabilized, _ = read_take(root)
+    assert cli("remove", root, "-o", take / "quasistatic.usdc", "--model", models / "f.removal", "--attach", root) == 0
+    quasistatic, _ = read_take(root)
+    expected, offsets = remove_dynamics(stabilized.points, *stabilized.skull(), stabilized.fps, load_model(models / "f.removal"))
+    assert np.abs(offsets).max() > 1e-4  # the model predicts something
+    np.testing.assert_allclose(quasistatic.points, expected, atol=2e-6)
+    np.testing.assert_allclose(quasistatic.offsets, offsets, atol=2e-6)
+    assert cli("synthesize", root, "-o", take / "synthesized.hop.usdc", "--model", models / "h.synthesis", "--skull-motion", "hop",
+               "--attach", root) == 0
+    synthesized, _ = read_take(root)
+    expected, offsets = synthesize_dynamics(quasistatic.points, *synthesized.skull(), quasistatic.fps, load_model(models / "h.synthesis"))
+    np.testing.assert_allclose(synthesized.points, expected, atol=2e-6)
+    np.testing.assert_allclose(synthesized.offsets, offsets, atol=2e-6)
