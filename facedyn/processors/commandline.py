@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 import threading
@@ -33,6 +34,9 @@ class ArgparseError(Exception):
 def run_guarded(argv: list[str], build) -> int:
     """Parse argv with the parser `build()` makes and run its handler; every failure ends as one line (exit 1 or 2)."""
     debug, as_json = "--debug" in argv, "--json" in argv
+    # Read .usdc values with pread, not mmap: a mapped multi-GB take counts every page a
+    # streaming step has touched in its resident memory; read, it stays a chunk's worth.
+    os.environ.setdefault("USDC_USE_PREAD", "1")
     try:
         import facedyn.usd  # noqa: F401  (registers the USD plugins; fails with a clear message if it cannot)
     except Exception as exc:
