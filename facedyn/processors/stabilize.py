@@ -195,6 +195,7 @@ def _whole_take_model(reader, params, weights, rest, three_point, schedule):
     from facedyn.geometry import rigid
     from facedyn.stabilize import baselines
     from facedyn.stabilize import rest as rest_estimate
+    from facedyn.stabilize.api import INIT_ICP_ITERATIONS
     from facedyn.stabilize.rigidity import SAMPLE_FRAMES, estimate_rigidity
 
     count = reader.frame_count
@@ -204,9 +205,10 @@ def _whole_take_model(reader, params, weights, rest, three_point, schedule):
         sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count, SAMPLE_FRAMES)).world_points())
         model = estimate_rigidity(sample)
         return model.weights, model.rest
-    sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count)).world_points()).astype(np.float64)
-    rot, trans = baselines.align_frames(sample, sample[0], params["init"], weights, three_point)
-    return weights, rest_estimate.estimate_rest(rigid.apply(rot, trans, sample), schedule.widths_pos[-1])
+    sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count)).world_points())
+    rot, trans = baselines.align_frames(sample, sample[0].astype(np.float64), params["init"], weights, three_point,
+                                        icp_iterations=INIT_ICP_ITERATIONS)
+    return weights, rest_estimate.estimate_rest(rigid.apply(rot, trans, sample.astype(np.float64)), schedule.widths_pos[-1])
 
 
 def _tracked(world: np.ndarray) -> np.ndarray:
