@@ -144,7 +144,7 @@ def chunked_vs_unchunked(root: Path, truth: np.ndarray) -> dict:
         unchunked_error.append(np.median(np.linalg.norm(unchunked.skull_points[rows] - truth[rows], axis=-1), axis=1))
     difference, chunked_error, unchunked_error = (np.concatenate(d) for d in (difference, chunked_error, unchunked_error))
     return {"case": f"chunked vs unchunked stabilize, {capture.frame_count} frames",
-            "max_vertex_difference_cm": float(difference.max()),
+            "max_vertex_difference_cm": float(difference.max()), "frame_of_max_difference": int(difference.argmax()),
             "median_frame_max_difference_cm": float(np.median(difference)),
             "p99_frame_max_difference_cm": float(np.percentile(difference, 99)),
             "median_vertex_error_vs_truth_cm": {"chunked": float(np.median(chunked_error)), "unchunked": float(np.median(unchunked_error))},

@@ -154,8 +154,8 @@ class _ChunkedSolve:
             )
             first, skull_to_world = blend.add(k, dualquat.from_translate_orient(result.translate, result.orient))
             rows = slice(first - start, first - start + len(skull_to_world))
-            active = np.flatnonzero(result.model.weights > 0) if result.model is not None else (
-                np.arange(world.shape[1]) if weights is None else np.flatnonzero(weights > 0))
+            used = result.model.weights if result.model is not None else weights  # what the solve weighted
+            active = np.arange(world.shape[1]) if used is None else np.flatnonzero(used > 0)
             done = finish(world[rows], dualquat.conjugate(skull_to_world), result.rest, active, result.method, None, {})
             self._account(result, done)
             frames = reader.time_codes[first:first + len(skull_to_world)]
