@@ -151,7 +151,7 @@ def chunked_vs_unchunked(root: Path, truth: np.ndarray) -> dict:
             "p99_frame_median_error_vs_truth_cm": {"chunked": float(np.percentile(chunked_error, 99)),
                                                    "unchunked": float(np.percentile(unchunked_error, 99))},
             "unchunked_seconds": round(unchunked.timings["total"], 1), "target_cm": 0.001,
-            "how": "true skull and rest (the simulator's), the take's rigid mask, fast solver; streamed chunks 4096/128"}
+            "how": "the take's given rest and rigid mask, fast solver; streamed chunks 4096/128; truth: the simulated skin"}
 
 
 def main() -> None:
