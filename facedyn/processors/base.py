@@ -19,7 +19,7 @@ import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, ClassVar
+from typing import Any, Callable, ClassVar, Iterable
 
 from facedyn.errors import UsageError
 from facedyn.progress import Progress
@@ -161,6 +161,9 @@ class LayerOutput:
     summary: dict[str, Any] = field(default_factory=dict)
     root: Path | None = None  # a take root to create (or extend) with this layer as its base
     actor: Path | None = None  # an actor asset to record in that take root (import --actor)
+    # Streamed per-frame values: consecutive LayerContents over layer.frames, computed as the
+    # runner writes them (layer then holds the static values, read after the first chunk).
+    chunks: Iterable[Any] | None = None
 
 
 @dataclass

@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import signal
 import sys
+import threading
 import traceback
+from contextlib import contextmanager
 from pathlib import Path
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
@@ -30,6 +34,9 @@ class ArgparseError(Exception):
 def run_guarded(argv: list[str], build) -> int:
     """Parse argv with the parser `build()` makes and run its handler; every failure ends as one line (exit 1 or 2)."""
     debug, as_json = "--debug" in argv, "--json" in argv
+    # Read .usdc values with pread, not mmap: a mapped multi-GB take counts every page a
+    # streaming step has touched in its resident memory; read, it stays a chunk's worth.
+    os.environ.setdefault("USDC_USE_PREAD", "1")
     try:
         import facedyn.usd  # noqa: F401  (registers the USD plugins; fails with a clear message if it cannot)
     except Exception as exc:
@@ -37,8 +44,11 @@ def run_guarded(argv: list[str], build) -> int:
     from facedyn.errors import FacedynError, UsageError
 
     try:
-        args = build().parse_args(argv)
-        return args.handler(args)
+        with signals_raise():
+            args = build().parse_args(argv)
+            return args.handler(args)
+    except Interrupted as exc:
+        return fail(f"usdfacedyn: interrupted ({exc.name})", 128 + exc.number, as_json)
     except KeyboardInterrupt:
         return fail("usdfacedyn: interrupted", 130, as_json)
     except ArgparseError as exc:
@@ -55,6 +65,39 @@ def run_guarded(argv: list[str], build) -> int:
             return fail(f"usdfacedyn: error: {message}", EXIT_FAILURE, as_json)
         return fail(f"usdfacedyn: internal error: {type(exc).__name__}: {exc} (rerun with --debug for a traceback)",
                      EXIT_FAILURE, as_json)
+
+
+class Interrupted(BaseException):
+    """SIGTERM or SIGHUP arrived: raised so every `finally` runs (temporary files removed) before exiting."""
+
+    def __init__(self, number: int):
+        super().__init__(number)
+        self.number = number
+        self.name = signal.Signals(number).name
+
+
+@contextmanager
+def signals_raise():
+    """While inside, SIGTERM and SIGHUP raise Interrupted and SIGINT KeyboardInterrupt (main thread only).
+
+    A farm scheduler stops a job with SIGTERM; Python's default would end the process at
+    once, leaving a half-written `.NAME.PID.XXXX.usdc` beside the output. Raising instead
+    unwinds through the writers' cleanup. The previous handlers come back on exit.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(number, _frame):
+        raise Interrupted(number)
+
+    previous = {number: signal.signal(number, interrupt) for number in (signal.SIGTERM, signal.SIGHUP)}
+    previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def fail(message: str, code: int, as_json: bool) -> int:

@@ -3,7 +3,8 @@
 Colours show each vertex's dynamics offset along its normal (green out, red in, grey
 zero) on a symmetric range in mm, the way the papers show results; muting the layer
 brings back the plain surface. It reads the take below the preview role: the strongest
-result under it (synthesized, else quasistatic).
+result under it (synthesized, else quasistatic). It streams in chunks; the automatic colour
+range is taken on an even sample of at most 2,048 frames (every frame of a shorter take).
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import numpy as np
 
 from facedyn.errors import UsageError
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, single_input
+from facedyn.processors.remove import CHUNK_FRAMES
 from facedyn.progress import Progress
 
 
@@ -28,26 +30,40 @@ class PreviewProcessor(Processor):
 
     def prepare(self, request: Request) -> Plan:
         from facedyn.usd.errors import TakeError
-        from facedyn.usd.take import read_take_below
+        from facedyn.usd.frames import TakeFrames
 
         path = single_input(request)
         if not request.output.name.endswith(".preview.usdc"):
             raise UsageError(f"{request.output}: name preview layers *.preview.usdc so tools can tell them apart")
-        perf, source = read_take_below(path, self.writes.role, frames=request.frames)
-        if perf.offsets is None:
-            raise TakeError(f"{path}: {source.mesh_path} has no dynamics offsets to preview (run remove or synthesize first)")
-        description = {"take": str(path), "frames": perf.frame_count, "mesh": source.mesh_path}
-        return Plan(description, (perf, source, request.params["range_mm"]))
+        reader = TakeFrames(path, self.writes.role, frames=request.frames)
+        if reader.head.offsets is None:
+            raise TakeError(f"{path}: {reader.source.mesh_path} has no dynamics offsets to preview (run remove or synthesize first)")
+        description = {"take": str(path), "frames": reader.frame_count, "mesh": reader.source.mesh_path}
+        return Plan(description, (reader, request.params["range_mm"]))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.preview.heatmap import offset_heat
+        from facedyn.stabilize.rest import sample_frames
         from facedyn.usd import schema
         from facedyn.usd.layers import LayerContent
 
-        perf, source, range_mm = plan.state
-        colours, signed, used_range_mm = offset_heat(perf.points, perf.offsets, perf.topology.triangles(), range_mm or None)
-        layer = LayerContent(frames=perf.frames, mesh_path=source.mesh_path,
-                             skull_path=source.skull_path or str(Path(source.mesh_path).parent),
-                             display_color=colours, face=schema.FaceAttributes(role=None))
-        summary = {"range_mm": used_range_mm, "peak_normal_offset_mm": round(float(np.abs(signed).max()), 2)}
-        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.inputs), summary=summary)
+        reader, range_mm = plan.state
+        source, triangles = reader.source, reader.head.topology.triangles()
+        if not range_mm:
+            sample = reader.read_frames(sample_frames(reader.frame_count))
+            range_mm = offset_heat(sample.points, sample.offsets, triangles)[2]
+        layer = LayerContent(frames=reader.time_codes, mesh_path=source.mesh_path,
+                             skull_path=source.skull_path or str(Path(source.mesh_path).parent), face=schema.FaceAttributes(role=None))
+        summary = {"range_mm": range_mm, "peak_normal_offset_mm": 0.0}
+
+        def chunks():
+            progress.start("preview", reader.frame_count)
+            for window in reader.windows(CHUNK_FRAMES):
+                colours, signed, _ = offset_heat(window.take.points, window.take.offsets, triangles, range_mm)
+                peak = round(float(np.abs(signed).max()), 2)
+                summary["peak_normal_offset_mm"] = max(summary["peak_normal_offset_mm"], peak)
+                yield LayerContent(frames=window.take.frames, display_color=colours)
+                progress.advance(window.stop - window.start)
+            progress.finish()
+
+        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.inputs), summary=summary, chunks=chunks())

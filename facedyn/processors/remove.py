@@ -4,6 +4,10 @@ Reads the stabilized take (the layers below the quasistatic role) and writes the
 quasistatic layer: points = the quasistatic skin in skull space, and the removed dynamics
 as `primvars:facedyn:dynamicsOffset` (captured - quasistatic). F's features are skull
 landmark motion in the skull frame, so the take must be stabilized.
+
+The take streams through in chunks of CHUNK_FRAMES, each read with the frames of context
+the model's windows reach (context_frames), so the result equals the whole take's and
+memory is bounded by a chunk.
 """
 from __future__ import annotations
 
@@ -15,6 +19,8 @@ from facedyn.errors import UsageError
 from facedyn.performance import BACKENDS
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device, single_input
 from facedyn.progress import Progress
+
+CHUNK_FRAMES = 1024  # frames computed, held and written (one value clip of a long take) at a time
 
 
 class RemoveProcessor(Processor):
@@ -30,42 +36,65 @@ class RemoveProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        perf, source, model = read_with_model(request, self.writes.role, "removal")
-        description = {"take": str(request.inputs[0]), "frames": perf.frame_count, "model": str(request.params["model"]),
+        reader, model = reader_with_model(request, self.writes.role, "removal")
+        description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "model": str(request.params["model"]),
                        "samples": int(len(model.face.samples))}
-        return Plan(description, (perf, source, model, request.params))
+        return Plan(description, (reader, model, request.params))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.dynamics.removal import remove_dynamics
         from facedyn.usd import schema
         from facedyn.usd.layers import LayerContent
 
-        perf, source, model, params = plan.state
-        translate, orient = perf.skull()
-        progress.start("remove dynamics", 1)
-        quasistatic, offsets = remove_dynamics(perf.points, translate, orient, perf.fps, model,
-                                               backend=params["backend"], device=params["device"])
-        progress.finish()
-        layer = LayerContent(
-            frames=perf.frames, mesh_path=source.mesh_path, skull_path=source.skull_path, points=quasistatic, offsets=offsets,
-            face=schema.FaceAttributes(role=self.writes.role, skin_samples=model.face.samples),
-        )
+        reader, model, params = plan.state
+        source = reader.source
+        layer = LayerContent(frames=reader.time_codes, mesh_path=source.mesh_path, skull_path=source.skull_path,
+                             face=schema.FaceAttributes(role=self.writes.role, skin_samples=model.face.samples))
+        stats = OffsetStats("removed")
+
+        def chunks():
+            progress.start("remove dynamics", reader.frame_count)
+            for window in reader.windows(CHUNK_FRAMES, context_frames(model)):
+                translate, orient = window.take.skull()
+                quasistatic, offsets = remove_dynamics(window.take.points, translate, orient, reader.fps, model,
+                                                       backend=params["backend"], device=params["device"])
+                yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=quasistatic[window.inner],
+                                   offsets=stats.add(offsets[window.inner]))
+                progress.advance(window.stop - window.start)
+            progress.finish()
+
         return LayerOutput(layer=layer, timing=source.timing, inputs=model_inputs(source, params["model"]),
-                           summary=offset_summary(offsets, "removed"))
+                           summary=stats.summary, chunks=chunks())
+
+
+def reader_with_model(request: Request, role_name: str, kind: str):
+    """The take below `role_name` (a chunked reader, facedyn.usd.frames) and a model of `kind` that fits it."""
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.usd.frames import TakeFrames
+
+    path = single_input(request)
+    reader = TakeFrames(path, role_name, frames=request.frames)
+    model = load_model(request.params["model"], topology=reader.head.topology, fps=reader.fps)
+    if model.kind != kind:
+        raise UsageError(f"--model {request.params['model']}: a {model.kind} model; this step needs a {kind} model")
+    check_skull_frame(path, reader.head, request.params["model"], model)
+    return reader, model
 
 
 def read_with_model(request: Request, role_name: str, kind: str):
-    """The take below `role_name` and a model of `kind` that fits it (topology, frame rate)."""
-    from facedyn.dynamics.modelfile import load_model
-    from facedyn.usd.take import read_take_below
+    """The whole take below `role_name` (in memory), its source, and a model of `kind` that fits it."""
+    reader, model = reader_with_model(request, role_name, kind)
+    return reader.read(0, reader.frame_count), reader.source, model
 
-    path = single_input(request)
-    perf, source = read_take_below(path, role_name, frames=request.frames)
-    model = load_model(request.params["model"], topology=perf.topology, fps=perf.fps)
-    if model.kind != kind:
-        raise UsageError(f"--model {request.params['model']}: a {model.kind} model; this step needs a {kind} model")
-    check_skull_frame(path, perf, request.params["model"], model)
-    return perf, source, model
+
+def context_frames(model) -> int:
+    """Frames of context on each side that make a chunk's result equal to the whole take's.
+
+    Every window a model reads (feature windows, skull motion past and future, smoothing),
+    plus the frames its velocities and accelerations difference over.
+    """
+    motion = model.skull_input
+    return sum(int(w) for w in model.windows.values()) + motion.past + motion.future + 4
 
 
 def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:
@@ -88,7 +117,24 @@ def model_inputs(source, model_path: Path) -> list[str]:
     return list(source.inputs) + [str(Path(model_path).resolve())]
 
 
+class OffsetStats:
+    """Peak and RMS offset magnitude accumulated chunk by chunk; `summary` fills in as chunks pass."""
+
+    def __init__(self, what: str):
+        self.what, self.peak, self.squares, self.count = what, 0.0, 0.0, 0
+        self.summary: dict = {}
+
+    def add(self, offsets: np.ndarray) -> np.ndarray:
+        magnitude = np.linalg.norm(offsets, axis=-1)
+        self.peak = max(self.peak, float(magnitude.max()))
+        self.squares += float(np.sum(magnitude.astype(np.float64) ** 2))
+        self.count += magnitude.size
+        self.summary.update({f"peak_{self.what}_offset_mm": round(self.peak * 10, 3),
+                             f"rms_{self.what}_offset_mm": round(float(np.sqrt(self.squares / self.count)) * 10, 3)})
+        return offsets
+
+
 def offset_summary(offsets: np.ndarray, what: str) -> dict:
-    magnitude = np.linalg.norm(offsets, axis=-1)
-    return {f"peak_{what}_offset_mm": round(float(magnitude.max()) * 10, 3),
-            f"rms_{what}_offset_mm": round(float(np.sqrt(np.mean(magnitude**2))) * 10, 3)}
+    stats = OffsetStats(what)
+    stats.add(offsets)
+    return stats.summary

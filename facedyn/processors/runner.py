@@ -48,6 +48,8 @@ def execute(processor: Processor, request: Request, progress: Progress, dry_run:
         computed = time.perf_counter() - started
         if isinstance(output, LayerOutput):
             report.update(_write_layer(processor, request, output))
+            if output.chunks is not None:  # streamed: computed while written
+                computed = time.perf_counter() - started
         elif isinstance(output, FileOutput):
             report["output"] = str(output.save(request.output))
         elif not isinstance(output, FolderOutput):
@@ -121,7 +123,7 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
     root = output.root or request.attach
 
     def write():
-        layers.write_layer(request.output, output.layer, output.timing, provenance, define=output.define)
+        layers.write_layer(request.output, output.layer, output.timing, provenance, define=output.define, chunks=output.chunks)
 
     report: dict[str, Any] = {"frame_count": int(len(frames)), "frame_range": [first, last]}
     if root is None:

@@ -4,9 +4,16 @@ Reads the capture (the layers below the stabilized role) and writes the stabiliz
 the skull's translate + orient per frame, the skin in skull space, the per-frame solve
 error, and the rest mesh it solved against. Composed over the capture it reproduces the
 captured world-space points.
+
+The take streams through in overlapping chunks (facedyn.stabilize.chunks, as mode pursuit
+solves long takes in memory): each chunk is read, solved and blended into its neighbour,
+and its finished frames go to the layer writer, so memory is bounded by a chunk whatever
+the take's length. A take longer than one chunk is solved against one rest mesh and one
+set of rigid weights for the whole take, found first on an even sample of its frames.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +22,7 @@ from facedyn.errors import UsageError
 from facedyn.performance import BACKENDS
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, single_input
 from facedyn.progress import Progress
+from facedyn.stabilize.chunks import StreamingBlend, chunk_ranges
 
 METHODS = ("mode-pursuit", "three-point", "procrustes", "icp")
 
@@ -52,17 +60,25 @@ class StabilizeProcessor(Processor):
         Parameter("backend", str, "auto", "fast solver's energy kernel", BACKENDS),
         Parameter("reference_fps", float, 120.0, "frame rate at which the paper's per-frame velocity widths are read",
                   above=0.0, maximum=100000.0),
+        Parameter("chunk_frames", int, 4096, "frames solved (and held in memory) at a time; longer takes go in "
+                  "overlapping chunks", minimum=64, maximum=1_000_000),
+        Parameter("chunk_overlap", int, 128, "frames shared by consecutive chunks (at most a quarter of --chunk-frames)",
+                  minimum=8, maximum=250_000),
     )
 
     def prepare(self, request: Request) -> Plan:
+        from facedyn.usd.frames import TakeFrames
+
         from facedyn.usd.rootedit import recorded_actor
-        from facedyn.usd.take import read_take_below
 
         path = single_input(request)
-        perf, source = read_take_below(path, self.writes.role, frames=request.frames)
         params = dict(request.params)
         if params["actor"] is None:
             params["actor"] = recorded_actor(path)
+        if params["chunk_frames"] < 4 * params["chunk_overlap"]:
+            raise UsageError(f"--chunk-frames ({params['chunk_frames']}) must be at least 4 x --chunk-overlap ({params['chunk_overlap']})")
+        reader = TakeFrames(path, self.writes.role, frames=request.frames)
+        perf = reader.head
         prior = None
         if params["actor"] is not None:
             perf, prior = with_actor(perf, params["actor"], path, params)
@@ -71,53 +87,154 @@ class StabilizeProcessor(Processor):
             weights = None  # found on this take within the actor's rigid region
         solve_weights = prior.weights if prior is not None else weights
         description = {
-            "take": str(path), "frames": perf.frame_count, "points": perf.point_count, "method": params["method"],
+            "take": str(path), "frames": reader.frame_count, "points": perf.point_count, "method": params["method"],
             "solve_vertices": int(np.count_nonzero(solve_weights)) if solve_weights is not None else perf.point_count,
             "rest": f"the actor's neutral ({params['actor']})" if prior is not None else "estimated from the data" if rest is None
             else "the take's rest points",
             "three_point": three_point,
         }
-        return Plan(description, (perf, source, params, weights, rest, three_point, prior))
+        return Plan(description, (reader, perf, params, weights, rest, three_point, prior))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
-        from facedyn.stabilize.api import stabilize
         from facedyn.stabilize.schedule import Schedule
         from facedyn.usd import schema
         from facedyn.usd.layers import LayerContent
 
-        perf, source, params, weights, rest, three_point, prior = plan.state
+        reader, perf, params, weights, rest, three_point, prior = plan.state
         discovering = weights is None and (rest is None or prior is not None) and params["method"] == "mode-pursuit"
         # A plain capture (no mask, no rest) or an actor's take: the rigid mode is discovered first (from the data, or
         # checked against the actor's), then solved on the locked fine schedule.
         make = Schedule.locked if discovering else Schedule
         schedule = make(iterations=params["iterations"], reference_fps=params["reference_fps"])
-        progress.start(f"stabilize ({params['method']})", 1)
-        result = stabilize(
-            perf.world_points(), perf.fps, method=params["method"], solver=params["solver"], rest=rest, weights=weights,
-            prior=prior, init=params["init"], three_point=three_point, schedule=schedule, backend=params["backend"],
-        )
-        progress.finish()
+        source = reader.source
         layer = LayerContent(
-            frames=perf.frames, mesh_path=source.mesh_path, skull_path=source.skull_path or source.mesh_path.rsplit("/", 1)[0],
-            points=result.skull_points, skull_translate=result.translate, skull_orient=result.orient,
-            solve_error=result.solve_error,
-            face=schema.FaceAttributes(role=self.writes.role, rest_points=result.rest.astype(np.float32), **_actor_setup(perf, params)),
-            skull=schema.SkullAttributes(solver=params["method"], landmarks=perf.landmarks, reference_frame=float(perf.frames[0])),
+            frames=reader.time_codes, mesh_path=source.mesh_path,
+            skull_path=source.skull_path or source.mesh_path.rsplit("/", 1)[0],
+            skull=schema.SkullAttributes(solver=params["method"], landmarks=perf.landmarks, reference_frame=float(reader.time_codes[0])),
         )
-        summary = {
-            "median_solve_error_cm": round(float(np.median(result.solve_error)), 5),
-            "seconds": {k: round(v, 3) for k, v in result.timings.items()},
-        }
-        if params["actor"] is not None:
-            summary["actor"] = str(params["actor"])
-        if result.model is not None:
-            summary["rigid_vertices"] = int(np.count_nonzero(result.model.weights >= 0.99))
-        if result.knot_spacing is not None:
-            summary["knot_spacing_s"] = round(result.knot_spacing, 5)
+        summary: dict = {}
+        solve = _ChunkedSolve(reader, params, weights, rest, three_point, schedule, prior)
+
+        def chunks():
+            for piece in solve.pieces(progress):
+                if piece.solved_rest is not None:  # known once the first chunk is solved; written with the static values
+                    layer.face = schema.FaceAttributes(role=self.writes.role, rest_points=piece.solved_rest.astype(np.float32),
+                                                       **_actor_setup(perf, params))
+                yield piece.content
+            summary.update(solve.summary())
+
+        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.inputs), summary=summary, chunks=chunks())
+
+
+@dataclass
+class _Piece:
+    content: object  # LayerContent of finished frames
+    solved_rest: np.ndarray | None  # with the first piece: the rest mesh the take is solved against
+
+
+class _ChunkedSolve:
+    """The take solved chunk by chunk (facedyn.stabilize.chunks), yielding finished frames as layer chunks."""
+
+    def __init__(self, reader, params, weights, rest, three_point, schedule, prior):
+        self.reader, self.params, self.weights, self.rest, self.prior = reader, params, weights, rest, prior
+        self.three_point, self.schedule = three_point, schedule
+        self.ranges = chunk_ranges(reader.frame_count, params["chunk_frames"], params["chunk_overlap"])
+        self.errors: list[np.ndarray] = []
+        self.timings: dict[str, float] = {}
+        self.energy = 0.0
+        self.backend = None
+        self.rigid_vertices: int | None = None  # vertices the last chunk found rigid
+        self.knot_spacing: float | None = None
+
+    def pieces(self, progress: Progress):
+        from facedyn.geometry import dualquat
+        from facedyn.stabilize.api import finish, stabilize
+        from facedyn.usd.layers import LayerContent
+
+        params, reader = self.params, self.reader
+        weights, rest = self.weights, self.rest
+        if len(self.ranges) > 1 and self.prior is None and (rest is None or (weights is None and params["method"] == "mode-pursuit")):
+            weights, rest = _whole_take_model(reader, params, weights, rest, self.three_point, self.schedule)
+        blend = StreamingBlend(self.ranges, params["chunk_overlap"] // 2)
+        progress.start(f"stabilize ({params['method']})", reader.frame_count)
+        for k, (start, stop) in enumerate(self.ranges):
+            world = reader.read(start, stop).world_points()
+            result = stabilize(
+                world, reader.fps, method=params["method"], solver=params["solver"], rest=rest, weights=weights,
+                prior=self.prior, init=params["init"], three_point=self.three_point, schedule=self.schedule, backend=params["backend"],
+                chunk_frames=max(stop - start, 4), chunk_overlap=0,  # one chunk: this one
+            )
+            first, skull_to_world = blend.add(k, dualquat.from_translate_orient(result.translate, result.orient))
+            rows = slice(first - start, first - start + len(skull_to_world))
+            used = result.model.weights if result.model is not None else weights  # what the solve weighted
+            active = np.arange(world.shape[1]) if used is None else np.flatnonzero(used > 0)
+            done = finish(world[rows], dualquat.conjugate(skull_to_world), result.rest, active, result.method, None, {})
+            self._account(result, done)
+            frames = reader.time_codes[first:first + len(skull_to_world)]
+            content = LayerContent(frames=frames, points=done.skull_points,
+                                   skull_translate=done.translate, skull_orient=done.orient, solve_error=done.solve_error)
+            yield _Piece(content, result.rest if k == 0 else None)
+            progress.advance(len(frames))
+        progress.finish()
+
+    def _account(self, result, done) -> None:
+        self.errors.append(done.solve_error)
+        for key, seconds in result.timings.items():
+            self.timings[key] = self.timings.get(key, 0.0) + seconds
         if result.energy is not None:
-            summary["final_energy"] = round(float(result.energy), 3)
-            summary["backend"] = result.backend
-        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.inputs), summary=summary)
+            self.energy += result.energy
+            self.backend = result.backend
+        if result.model is not None:
+            self.rigid_vertices = int(np.count_nonzero(result.model.weights >= 0.99))
+        self.knot_spacing = result.knot_spacing
+
+    def summary(self) -> dict:
+        summary = {
+            "median_solve_error_cm": round(float(np.median(np.concatenate(self.errors))), 5),
+            "chunks": len(self.ranges),
+            "seconds": {k: round(v, 3) for k, v in self.timings.items()},
+        }
+        if self.backend is not None:
+            summary["final_energy"] = round(float(self.energy), 3)
+            summary["backend"] = self.backend
+        if self.params["actor"] is not None:
+            summary["actor"] = str(self.params["actor"])
+        if self.rigid_vertices is not None:
+            summary["rigid_vertices"] = self.rigid_vertices
+        if self.knot_spacing is not None:
+            summary["knot_spacing_s"] = round(self.knot_spacing, 5)
+        return summary
+
+
+def _whole_take_model(reader, params, weights, rest, three_point, schedule):
+    """One rest mesh and rigid weights for every chunk of a long take, from an even sample of its frames.
+
+    As stabilize() finds them on a whole take: a plain capture's rigid mode
+    (facedyn.stabilize.rigidity, on its own frame sample), a rest estimated from initially
+    aligned frames, or for the per-frame baselines the first frame.
+    """
+    from facedyn.geometry import rigid
+    from facedyn.stabilize import baselines
+    from facedyn.stabilize import rest as rest_estimate
+    from facedyn.stabilize.api import INIT_ICP_ITERATIONS
+    from facedyn.stabilize.rigidity import SAMPLE_FRAMES, estimate_rigidity
+
+    count = reader.frame_count
+    if params["method"] != "mode-pursuit":
+        return weights, reader.read(0, 1).world_points()[0].astype(np.float64)
+    if weights is None:
+        sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count, SAMPLE_FRAMES)).world_points())
+        model = estimate_rigidity(sample)
+        return model.weights, model.rest
+    sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count)).world_points())
+    rot, trans = baselines.align_frames(sample, sample[0].astype(np.float64), params["init"], weights, three_point,
+                                        icp_iterations=INIT_ICP_ITERATIONS)
+    return weights, rest_estimate.estimate_rest(rigid.apply(rot, trans, sample.astype(np.float64)), schedule.widths_pos[-1])
+
+
+def _tracked(world: np.ndarray) -> np.ndarray:
+    """The frames a tracker did not drop (whole frames of NaN)."""
+    return world[np.isfinite(world).all(axis=(1, 2))]
 
 
 def with_actor(perf, actor_path: Path, take: Path, params: dict):

@@ -3,7 +3,8 @@
 Reads the quasistatic take (the layers below the synthesized role, so other synthesized
 variants never feed back) and writes `synthesized.NAME.usdc`: the new skull motion,
 points = quasistatic skin + the synthesized offsets (propagated to the whole mesh), and the
-offsets primvar.
+offsets primvar. The take streams through in chunks with the model's context frames, as in
+remove (facedyn.processors.remove).
 """
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pathlib import Path
 
 from facedyn.performance import BACKENDS
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device
-from facedyn.processors.remove import model_inputs, offset_summary, read_with_model
+from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames, model_inputs, offset_summary, reader_with_model
 from facedyn.progress import Progress
 
 
@@ -44,26 +45,41 @@ class SynthesizeProcessor(Processor):
     def prepare(self, request: Request) -> Plan:
         from facedyn.processors.motion_source import skull_motion
 
-        perf, source, model = read_with_model(request, self.writes.role, "synthesis")
+        reader, model = reader_with_model(request, self.writes.role, "synthesis")
         params = request.params
         if params["skull_motion"]:
-            translate, orient, described = skull_motion(params["skull_motion"], perf.fps, perf.frame_count, params["joint"], params["seed"],
-                                                        bvh=bvh_options(params))
+            translate, orient, described = skull_motion(params["skull_motion"], reader.fps, reader.frame_count, params["joint"],
+                                                        params["seed"], bvh=bvh_options(params))
         else:
-            (translate, orient), described = perf.skull(), "the take's own"
-        description = {"take": str(request.inputs[0]), "frames": perf.frame_count, "skull_motion": described}
-        return Plan(description, (perf, source, model, params, translate, orient, described))
+            (translate, orient), described = reader.skull(), "the take's own"
+        description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "skull_motion": described}
+        return Plan(description, (reader, model, params, translate, orient, described))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.dynamics.synthesis import synthesize_dynamics
+        from facedyn.usd.layers import LayerContent
 
-        perf, source, model, params, translate, orient, described = plan.state
-        progress.start("synthesize dynamics", 1)
-        points, offsets = synthesize_dynamics(perf.points, translate, orient, perf.fps, model,
-                                              backend=params["backend"], device=params["device"])
-        progress.finish()
-        return synthesized_output(perf, source, params["model"], points, offsets, translate, orient, self.writes.role,
-                                  {"skull_motion": described})
+        reader, model, params, translate, orient, described = plan.state
+        stats = OffsetStats("synthesized")
+
+        def chunks():
+            progress.start("synthesize dynamics", reader.frame_count)
+            for window in reader.windows(CHUNK_FRAMES, context_frames(model)):
+                t, q = translate[window.lo:window.hi], orient[window.lo:window.hi]
+                points, offsets = synthesize_dynamics(window.take.points, t, q, reader.fps, model,
+                                                      backend=params["backend"], device=params["device"])
+                inner = window.inner
+                yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=points[inner],
+                                   offsets=stats.add(offsets[inner]), skull_translate=translate[window.start:window.stop],
+                                   skull_orient=orient[window.start:window.stop])
+                progress.advance(window.stop - window.start)
+            progress.finish()
+
+        stats.summary["skull_motion"] = described
+        output = synthesized_layer(reader.time_codes, reader.head.landmarks, reader.source, params["model"], self.writes.role,
+                                   stats.summary)
+        output.chunks = chunks()
+        return output
 
 
 def bvh_options(params: dict) -> dict:
@@ -73,13 +89,21 @@ def bvh_options(params: dict) -> dict:
 
 def synthesized_output(perf, source, model_path, points, offsets, translate, orient, role_name, extra) -> LayerOutput:
     """The layer of new dynamics on a quasistatic take (synthesize and retarget write the same shape)."""
+    output = synthesized_layer(perf.frames, perf.landmarks, source, model_path, role_name,
+                               {**extra, **offset_summary(offsets, "synthesized")})
+    output.layer.points, output.layer.offsets = points, offsets
+    output.layer.skull_translate, output.layer.skull_orient = translate, orient
+    return output
+
+
+def synthesized_layer(frames, landmarks, source, model_path, role_name, summary) -> LayerOutput:
+    """The static part of a synthesized layer (its per-frame values come as arrays or chunks)."""
     from facedyn.usd import schema
     from facedyn.usd.layers import LayerContent
 
     layer = LayerContent(
-        frames=perf.frames, mesh_path=source.mesh_path, skull_path=source.skull_path, points=points, offsets=offsets,
-        skull_translate=translate, skull_orient=orient, face=schema.FaceAttributes(role=role_name),
-        skull=schema.SkullAttributes(solver="resampled", landmarks=perf.landmarks),
+        frames=frames, mesh_path=source.mesh_path, skull_path=source.skull_path, face=schema.FaceAttributes(role=role_name),
+        skull=schema.SkullAttributes(solver="resampled", landmarks=landmarks),
     )
     inputs = model_inputs(source, model_path) if model_path else list(source.inputs)
-    return LayerOutput(layer=layer, timing=source.timing, inputs=inputs, summary={**extra, **offset_summary(offsets, "synthesized")})
+    return LayerOutput(layer=layer, timing=source.timing, inputs=inputs, summary=summary)

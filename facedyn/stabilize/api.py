@@ -168,7 +168,7 @@ def stabilize(
     timings["init"] = time.perf_counter() - t0
     if method != "mode-pursuit":
         world_to_skull = dualquat.from_translate_orient(trans, quaternion.from_matrix(rot))
-        result = _finish(captured, world_to_skull, target, active, method, None, timings)
+        result = finish(captured, world_to_skull, target, active, method, None, timings)
         result.tracked = tracked
         result.timings["total"] = time.perf_counter() - t_total
         return result
@@ -202,7 +202,7 @@ def stabilize(
         chunk_overlap,
     )
     timings.update(out.timings)
-    result = _finish(captured, out.world_to_skull, rest, active, method, solver, timings)
+    result = finish(captured, out.world_to_skull, rest, active, method, solver, timings)
     final_weights = np.ones(n) if weights is None else weights
     spread = model.spread if model is not None else np.zeros(n)
     result.model = RigidModel(final_weights, rest, spread, model.noise_cm if model is not None else 0.0)
@@ -225,7 +225,7 @@ def _estimate_rest(world: np.ndarray, rot: np.ndarray, trans: np.ndarray, width:
     return rest
 
 
-def _finish(world, world_to_skull, rest, active, method, solver, timings) -> StabilizeResult:
+def finish(world, world_to_skull, rest, active, method, solver, timings) -> StabilizeResult:
     """Skull transforms, skull-space points, rest and per-frame error from world-to-skull maps."""
     t0 = time.perf_counter()
     frames, n, _ = world.shape

@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from facedyn.geometry import dualquat
+
 
 def chunk_ranges(frames: int, chunk_frames: int, overlap: int) -> list[tuple[int, int]]:
     """Equal chunks [start, stop) covering 0..frames, consecutive ones sharing >= overlap frames."""
@@ -39,3 +41,37 @@ def blend_weights(ranges: list[tuple[int, int]], ramp: int) -> list[np.ndarray]:
             t = np.clip((frames - mid) / max(ramp, 1e-9) + 0.5, 0.0, 1.0)
             weights[j] *= t if side > 0 else 1.0 - t
     return weights
+
+
+class StreamingBlend:
+    """Blends per-chunk solutions as they come, releasing frames once no later chunk touches them.
+
+    Chunks must arrive in order of `ranges` (chunk_ranges); `add(k, dq)` takes chunk k's
+    (frames, 8) dual quaternions and returns (first frame, blended unit dual quaternions)
+    of the frames now final: from chunk k's start up to where chunk k + 1 begins (to the
+    end for the last chunk). The result equals mode pursuit's in-memory blend of the same
+    chunks (facedyn.stabilize.modepursuit).
+    """
+
+    def __init__(self, ranges: list[tuple[int, int]], ramp: int):
+        self.ranges = ranges
+        self.weights = blend_weights(ranges, ramp)
+        self.pending = np.zeros((0, 8))  # weighted sums of frames from ranges[k][0] on, carried over from chunk k - 1
+        self.last: np.ndarray | None = None  # the last frame released, whose hemisphere the next one continues
+
+    def add(self, k: int, dq: np.ndarray) -> tuple[int, np.ndarray]:
+        start, stop = self.ranges[k]
+        total = np.zeros((stop - start, 8))
+        total[: len(self.pending)] = self.pending
+        dq = np.array(dq, dtype=np.float64)
+        dq[np.sum(total[:, :4] * dq[:, :4], axis=1) < 0] *= -1.0  # same hemisphere as the previous chunk
+        total += self.weights[k][:, None] * dq
+        final = stop if k == len(self.ranges) - 1 else self.ranges[k + 1][0]
+        self.pending = total[final - start:]
+        released = dualquat.normalize(total[: final - start])
+        if self.last is not None:
+            released = dualquat.make_continuous(np.concatenate([self.last[None], released]))[1:]
+        else:
+            released = dualquat.make_continuous(released)
+        self.last = released[-1]
+        return start, released

@@ -8,16 +8,19 @@ interrupted run never leaves a damaged file behind.
 """
 from __future__ import annotations
 
+import itertools
 import os
+import shutil
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Iterable, Iterator
 
 import numpy as np
 from pxr import Gf, Kind, Sdf, Tf, Usd, UsdGeom, Vt
 
 from facedyn.performance import UVs, Topology, roles
-from facedyn.usd import schema
+from facedyn.usd import clips, schema
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import LEGACY_PROCESSOR_ROLES, TAKE_ROOT
 from facedyn.usd.stage import relative_asset_path
@@ -26,6 +29,7 @@ from facedyn.usd.timing import Timing
 PERFORMANCE_PATH = "/Performance"
 SKULL_PATH = "/Performance/Skull"
 FACE_PATH = "/Performance/Skull/Face"
+PER_FRAME = ("points", "skull_translate", "skull_orient", "offsets", "solve_error", "display_color")
 
 
 @dataclass
@@ -53,15 +57,26 @@ def write_layer(
     timing: Timing,
     provenance: schema.Provenance,
     define: bool = False,
+    chunks: Iterable[LayerContent] | None = None,
+    clip_threshold: int | None = None,
 ) -> Path:
     """Write `content` as a layer at `path` (atomically) and return the path.
 
     The layer records its run (schema.RunRecord): processor, role, parameters, frames and
     inputs relative to `path`, each with its run id, so the same inputs give the same bytes.
+    `chunks` streams the per-frame values (consecutive LayerContents over content.frames,
+    e.g. a generator computing them) instead of content's own arrays; a layer of more than
+    `clip_threshold` (default clips.CLIP_THRESHOLD) frames is then written as value clips, one per chunk (facedyn.usd.clips),
+    so it is never whole in memory.
     """
     path = Path(path)
     check_writable(path)
-    _check_shapes(content)
+    sweep_stale_temps(path)
+    pieces = iter([content] if chunks is None else chunks)
+    first = next(pieces, None)
+    if first is None:
+        raise TakeError("nothing to write: the layer covers no frames")
+    _check_shapes(content, per_frame=False)  # the arrays are checked chunk by chunk (_checked)
     record = provenance.record(path.parent, layer_role(provenance, content))
     layer = Sdf.Layer.CreateAnonymous(path.suffix)
     frames = np.asarray(content.frames, dtype=np.float64)
@@ -69,11 +84,42 @@ def write_layer(
     layer.customLayerData = {"facedyn": record.as_dict()}
     stage = Usd.Stage.Open(layer)
     layer.defaultPrim = Sdf.Path(content.skull_path).GetPrefixes()[0].name
-    mesh_prim, skull_prim = _author_prims(stage, content, define)
-    _author_static(mesh_prim, skull_prim, content, record)
-    _author_time_samples(layer, mesh_prim.GetPath(), skull_prim.GetPath() if skull_prim else None, content)
-    export_atomically(layer, path)
+    declared = replace(content, **{name: getattr(first, name) for name in PER_FRAME})  # which attributes vary
+    mesh_prim, skull_prim = _author_prims(stage, declared, define)
+    _author_static(mesh_prim, skull_prim, declared, record)
+    mesh_path, skull_path = mesh_prim.GetPath(), skull_prim.GetPath() if skull_prim else None
+    pieces = _checked(itertools.chain([first], pieces), len(frames))
+    if len(frames) <= (clips.CLIP_THRESHOLD if clip_threshold is None else clip_threshold):
+        for piece in pieces:
+            _author_time_samples(layer, mesh_path, skull_path, piece)
+        export_atomically(layer, path)
+        clips.remove_other_clips(path, keep=None)
+        return path
+    varying = [attr for attr, _, _ in _frame_values(mesh_path, skull_path, first)]
+    writer = clips.ClipWriter(path, record.run, layer, skull_path or mesh_path.GetParentPath(), varying, export_atomically)
+    try:
+        for piece in pieces:
+            clip = writer.new_clip()
+            _author_time_samples(clip, mesh_path, skull_path, piece)
+            writer.add(clip, float(piece.frames[0]), float(piece.frames[-1]))
+            del clip
+        writer.finish()
+        export_atomically(layer, path)
+    finally:
+        writer.discard()
+    clips.remove_other_clips(path, keep=writer.folder)
     return path
+
+
+def _checked(pieces: Iterator[LayerContent], total: int) -> Iterator[LayerContent]:
+    """Each chunk's shapes checked as it comes; together they must cover the layer's frames."""
+    count = 0
+    for piece in pieces:
+        _check_shapes(piece)
+        count += len(piece.frames)
+        yield piece
+    if count != total:
+        raise ValueError(f"the chunks cover {count} frames, the layer {total}")
 
 
 def _author_prims(stage: Usd.Stage, content: LayerContent, define: bool):
@@ -139,6 +185,14 @@ def layer_role(provenance: schema.Provenance, content: LayerContent) -> str:
 def _author_time_samples(layer: Sdf.Layer, mesh_path: Sdf.Path, skull_path: Sdf.Path | None, content: LayerContent) -> None:
     """Author every frame's values directly on the layer (fast: no stage notices per sample)."""
     frames = [float(f) for f in content.frames]
+    with Sdf.ChangeBlock():
+        for attr_path, convert, values in _frame_values(mesh_path, skull_path, content):
+            for frame, value in zip(frames, values):
+                layer.SetTimeSample(attr_path, frame, convert(value) if convert else value)
+
+
+def _frame_values(mesh_path: Sdf.Path, skull_path: Sdf.Path | None, content: LayerContent) -> list:
+    """(attribute path, conversion to a USD value, per-frame values) of every time-varying attribute content has."""
     per_frame = []
     if content.points is not None:
         points = np.ascontiguousarray(content.points, dtype=np.float32)
@@ -156,10 +210,7 @@ def _author_time_samples(layer: Sdf.Layer, mesh_path: Sdf.Path, skull_path: Sdf.
         per_frame.append((skull_path.AppendProperty("xformOp:orient"), None, quats))
     if skull_path is not None and content.solve_error is not None:
         per_frame.append((skull_path.AppendProperty(schema.SOLVE_ERROR_ATTR), float, np.asarray(content.solve_error, np.float64).tolist()))
-    with Sdf.ChangeBlock():
-        for attr_path, convert, values in per_frame:
-            for frame, value in zip(frames, values):
-                layer.SetTimeSample(attr_path, frame, convert(value) if convert else value)
+    return per_frame
 
 
 def frame_extents(points: np.ndarray) -> np.ndarray:
@@ -169,11 +220,11 @@ def frame_extents(points: np.ndarray) -> np.ndarray:
     return np.stack([np.stack(lows, axis=1), np.stack(highs, axis=1)], axis=1)
 
 
-def _check_shapes(content: LayerContent) -> None:
+def _check_shapes(content: LayerContent, per_frame: bool = True) -> None:
     f = len(content.frames)
     if f == 0:
         raise TakeError("nothing to write: the layer covers no frames")
-    for name in ("points", "offsets", "display_color", "skull_translate", "skull_orient", "solve_error"):
+    for name in PER_FRAME if per_frame else ():
         value = getattr(content, name)
         if value is not None and len(value) != f:
             raise ValueError(f"{name} has {len(value)} frames, the layer covers {f}")
@@ -198,8 +249,14 @@ def check_writable(path: Path) -> None:
 
 
 def export_atomically(layer: Sdf.Layer, path: Path) -> None:
-    """Export layer to a temporary file beside path, then rename it over path."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent or ".")
+    """Export layer to a temporary file beside path, then rename it over path.
+
+    The temporary name carries the writer's pid (`.<stem>.<pid>.XXXX<suffix>`), so a later
+    write of the same file can tell a dead writer's leftovers from a live one's
+    (sweep_stale_temps); an interrupted writer removes its own (the signal handlers of
+    facedyn.processors.commandline raise, so this `finally` runs).
+    """
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.{os.getpid()}.", suffix=path.suffix, dir=path.parent or ".")
     os.close(fd)
     try:
         try:
@@ -216,6 +273,42 @@ def export_atomically(layer: Sdf.Layer, path: Path) -> None:
     reloaded = Sdf.Layer.Find(str(path))
     if reloaded is not None:
         reloaded.Reload(force=True)
+
+
+def sweep_stale_temps(path: Path) -> list[Path]:
+    """Remove the temporary files (and clip folders) of earlier writes of `path` whose writer is gone; return them."""
+    removed = []
+    prefix = f".{path.stem}."
+    for candidate in path.parent.glob(f"{clips.glob_escape(prefix)}*"):
+        pid = _writer_pid(candidate.name[len(prefix):])
+        if pid is None or _alive(pid):
+            continue
+        if candidate.is_dir():
+            shutil.rmtree(candidate, ignore_errors=True)
+        else:
+            candidate.unlink(missing_ok=True)
+        removed.append(candidate)
+    return removed
+
+
+def _writer_pid(rest: str) -> int | None:
+    """The pid in a temporary name's tail (`<pid>.XXXX.usdc`, or `<run>.clips.<pid>.tmp` for clip folders)."""
+    parts = rest.split(".")
+    if parts[-1] == "tmp" and len(parts) >= 2 and parts[-2].isdigit():
+        return int(parts[-2])
+    return int(parts[0]) if len(parts) >= 3 and parts[0].isdigit() else None
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's live process
+        return True
+    return True
 
 
 def _umask() -> int:

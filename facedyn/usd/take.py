@@ -66,6 +66,11 @@ def read_take_below(
     built on it. Fails, naming what to run, when no layer of the role it reads (Role.reads)
     lies below.
     """
+    return read_stage(stage_below(path, role_name), Path(path), mesh, frames)
+
+
+def stage_below(path: str | os.PathLike, role_name: str) -> Usd.Stage:
+    """The take's stage with every layer at or above `role_name`'s rank muted (see read_take_below)."""
     known = roles()
     if role_name not in known:
         raise TakeError(f"{path}: unknown role {role_name!r}; known: {', '.join(known)}")
@@ -85,7 +90,7 @@ def read_take_below(
             writer = next((p for p, r in LEGACY_PROCESSOR_ROLES.items() if r == wanted.reads), None)
             hint = f"; run `usdfacedyn {writer}` first" if writer else ""
             raise TakeError(f"{path}: a {role_name} layer is computed from a {wanted.reads} layer, and none lies below it{hint}")
-    return read_stage(stage, Path(path), mesh, frames)
+    return stage
 
 
 def read_stage(

@@ -1,0 +1,197 @@
+"""Long takes in bounded memory: a 4,058-point take of 10,000 and 50,000 frames through the pipeline.
+
+The capture is made cheaply: the simulator runs a short take of the built-in face (a smile
+while walking), whose true skull-space skin is looped back and forth (no jumps) under a
+procedural skull motion as long as the take, and written as the take's capture layer
+chunk by chunk (value clips past 5,000 frames, as `import` would write it). Tiny removal
+and synthesis models (1 epoch, their accuracy is not what is measured) are trained on the
+short take. Then each step runs as its own `usdfacedyn` process: stabilize, remove,
+synthesize (and import of a mesh cache, up to --import-max-frames), and its peak RSS is
+the process's VmHWM. Stabilize's throughput is vertex-frames per second of the step's wall
+time. At the first frame count the streamed (chunked) stabilize is compared with the
+unchunked solve of the same take (the same rest and rigid mask, the take's own).
+
+    python benchmarks/bench_long_take.py [--frames 10000 50000] [--workdir DIR] [--keep]
+
+Prints one JSON object per frame count (and one for the chunked/unchunked comparison).
+Disk: about 0.25 MB per frame for the capture and stabilized layers and 0.5 MB for each of
+quasistatic and synthesized (50,000 frames: about 15 GB); removed afterwards unless --keep.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+STEP = """
+import sys
+from facedyn.cli import main
+code = main(sys.argv[1:])
+status = open("/proc/self/status").read().split("\\n")
+peak = next(line.split()[1] for line in status if line.startswith("VmHWM"))
+print("VMHWM_KB", peak, file=sys.stderr)
+sys.exit(code)
+"""
+
+
+def run_step(*argv) -> dict:
+    """One usdfacedyn command in its own process: seconds, peak RSS (MB), exit code."""
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", STEP, *map(str, argv), "-q"], capture_output=True, text=True)
+    seconds = time.perf_counter() - start
+    peak = [line.split()[1] for line in done.stderr.splitlines() if line.startswith("VMHWM_KB")]
+    if done.returncode != 0:
+        raise SystemExit(f"{argv[0]} failed: {done.stderr.strip().splitlines()[-2:]}")
+    return {"seconds": round(seconds, 1), "peak_rss_mb": round(int(peak[0]) / 1024, 1)}
+
+
+def short_take(folder: Path, fps: float, train: bool = True):
+    """The simulated short take (built-in face) and (with `train`) tiny F and H trained on it."""
+    from facedyn.cli import main
+    from facedyn.sim.corpus import TakeSpec
+    from facedyn.sim.default_face import default_face
+    from facedyn.usd.corpus import build_corpus
+
+    build_corpus(folder / "corpus", default_face(), [TakeSpec("base", "walk", "smile", duration_s=3.0, seed=1, fps=fps)])
+    models = folder / "models"
+    quiet = ["--json"]
+    if train:
+        with contextlib.redirect_stdout(io.StringIO()):  # their JSON reports are not this benchmark's output
+            _train(main, folder, models, quiet)
+    return folder / "corpus" / "base", models
+
+
+def _train(main, folder: Path, models: Path, quiet: list[str]) -> None:
+    assert main(["train-removal", str(folder / "corpus"), "-o", str(models / "f.removal"), "--skull", "truth",
+                 "--epochs", "1", "--samples", "64", *quiet]) == 0
+    assert main(["train-synthesis", str(folder / "corpus"), "-o", str(models / "h.synthesis"), "--quasistatic",
+                 str(models / "f.removal"), "--skull", "truth", "--epochs", "1", *quiet]) == 0
+
+
+def looped(count: int, period: int) -> np.ndarray:
+    """Frame indices 0, 1, ..., period-1, period-2, ..., 0, 1, ...: a short take played back and forth."""
+    cycle = np.concatenate([np.arange(period), np.arange(period - 2, 0, -1)])
+    return cycle[np.arange(count) % len(cycle)]
+
+
+def write_capture(take_folder: Path, base: Path, frames: int, chunk: int = 1024):
+    """A `frames`-long capture layer + take root from the short take, written chunk by chunk.
+
+    Returns the root and a function giving the true skull-space skin of frames a..b-1.
+    """
+    from facedyn.processors.motion_source import skull_motion
+    from facedyn.geometry import quaternion
+    from facedyn.usd import layers, schema
+    from facedyn.usd.corpus import read_truth
+    from facedyn.usd.take import read_take
+
+    capture, source = read_take(base / "capture.usdc")
+    truth = read_truth(base)
+    skin = (truth.points + truth.offsets).astype(np.float32)  # true skull-space skin, y + u
+    translate, orient, _ = skull_motion("walk", capture.fps, frames, seed=5)
+    rotation = quaternion.to_matrix(orient).astype(np.float32)
+    codes = np.arange(1001, 1001 + frames, dtype=np.float64)
+    order = looped(frames, len(skin))
+
+    def chunks():
+        for a in range(0, frames, chunk):
+            b = min(frames, a + chunk)
+            world = np.einsum("fij,fnj->fni", rotation[a:b], skin[order[a:b]]) + translate[a:b, None, :].astype(np.float32)
+            yield layers.LayerContent(frames=codes[a:b], points=world)
+
+    face = schema.FaceAttributes(role="captured", rest_points=capture.rest_points, rigid_weights=capture.rigid_weights,
+                                 face_vertices=capture.face_vertices, skin_samples=capture.skin_samples,
+                                 alignment_vertices=capture.alignment_vertices)
+    content = layers.LayerContent(frames=codes, mesh_path=source.mesh_path, skull_path=source.skull_path, face=face,
+                                  skull=schema.SkullAttributes(landmarks=capture.landmarks), topology=capture.topology,
+                                  uvs=capture.uvs)
+    timing = source.timing.with_frames(codes[0], codes[-1])
+    provenance = schema.Provenance(processor="import", version="bench_long_take", parameters={"frames": frames},
+                                   frame_range=(codes[0], codes[-1]), inputs=[], role="captured")
+    take_folder.mkdir(parents=True, exist_ok=True)
+    path = layers.write_layer(take_folder / "capture.usdc", content, timing, provenance, define=True, chunks=chunks())
+    return layers.write_take_root(take_folder / "take.usda", [path], timing), lambda a, b: skin[order[a:b]]
+
+
+def chunked_vs_unchunked(root: Path, truth: np.ndarray) -> dict:
+    """The streamed stabilize (overlapping chunks) against one solve of the whole take, both against the truth.
+
+    truth: (F, N, 3) the true skull-space skin the capture was made from.
+    """
+    from facedyn.stabilize.api import stabilize
+    from facedyn.usd.frames import TakeFrames
+
+    capture = TakeFrames(root, "stabilized")
+    whole = capture.read(0, capture.frame_count)
+    unchunked = stabilize(whole.world_points(), whole.fps, rest=whole.rest_points,
+                          weights=whole.rigid_weights.astype(np.float64), chunk_frames=capture.frame_count)
+    del whole
+    streamed = TakeFrames(root, "quasistatic")
+    difference, chunked_error, unchunked_error = [], [], []
+    for window in streamed.windows(2048):
+        rows = slice(window.start, window.stop)
+        difference.append(np.linalg.norm(window.take.points - unchunked.skull_points[rows], axis=-1).max(axis=1))
+        chunked_error.append(np.median(np.linalg.norm(window.take.points - truth[rows], axis=-1), axis=1))
+        unchunked_error.append(np.median(np.linalg.norm(unchunked.skull_points[rows] - truth[rows], axis=-1), axis=1))
+    difference, chunked_error, unchunked_error = (np.concatenate(d) for d in (difference, chunked_error, unchunked_error))
+    return {"case": f"chunked vs unchunked stabilize, {capture.frame_count} frames",
+            "max_vertex_difference_cm": float(difference.max()), "frame_of_max_difference": int(difference.argmax()),
+            "median_frame_max_difference_cm": float(np.median(difference)),
+            "p99_frame_max_difference_cm": float(np.percentile(difference, 99)),
+            "median_vertex_error_vs_truth_cm": {"chunked": float(np.median(chunked_error)), "unchunked": float(np.median(unchunked_error))},
+            "p99_frame_median_error_vs_truth_cm": {"chunked": float(np.percentile(chunked_error, 99)),
+                                                   "unchunked": float(np.percentile(unchunked_error, 99))},
+            "unchunked_seconds": round(unchunked.timings["total"], 1), "target_cm": 0.001,
+            "how": "the take's given rest and rigid mask, fast solver; streamed chunks 4096/128; truth: the simulated skin"}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, nargs="+", default=[10_000, 50_000])
+    parser.add_argument("--fps", type=float, default=120.0)
+    parser.add_argument("--workdir", type=Path, default=None)
+    parser.add_argument("--keep", action="store_true")
+    parser.add_argument("--compare", action="store_true", help="also compare chunked and unchunked stabilize at the first count")
+    parser.add_argument("--compare-only", action="store_true", help="only stabilize, and compare it with the unchunked solve")
+    args = parser.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="long_take.", dir=args.workdir))
+    try:
+        base, models = short_take(work, args.fps, train=not args.compare_only)
+        for k, frames in enumerate(args.frames):
+            take = work / f"take_{frames}"
+            start = time.perf_counter()
+            root, truth = write_capture(take, base, frames)
+            points = truth(0, 1).shape[1]
+            record = {"case": f"long take {frames} frames", "frames": frames, "points": points,
+                      "capture_write_seconds": round(time.perf_counter() - start, 1)}
+            steps = {}
+            steps["stabilize"] = run_step("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root)
+            if not args.compare_only:
+                steps["remove"] = run_step("remove", root, "-o", take / "quasistatic.usdc", "--model", models / "f.removal",
+                                           "--attach", root)
+                steps["synthesize"] = run_step("synthesize", root, "-o", take / "synthesized.hop.usdc", "--model",
+                                               models / "h.synthesis", "--skull-motion", "hop", "--attach", root)
+            record["steps"] = steps
+            record["stabilize_vertex_frames_per_second"] = round(frames * points / steps["stabilize"]["seconds"])
+            record["disk_gb"] = round(sum(p.stat().st_size for p in take.rglob("*") if p.is_file()) / 2**30, 2)
+            print(json.dumps(record), flush=True)
+            if k == 0 and (args.compare or args.compare_only):
+                print(json.dumps(chunked_vs_unchunked(root, truth(0, frames))), flush=True)
+            if not args.keep:
+                shutil.rmtree(take)
+    finally:
+        if not args.keep:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
