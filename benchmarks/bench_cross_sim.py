@@ -167,6 +167,8 @@ def main() -> None:
     parser.add_argument("--h-epochs", type=int, default=20)
     parser.add_argument("--seconds", type=float, default=2.5, help="length of each test take")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--work", type=Path, help="keep the corpus, actor and models in this folder and reuse them when there "
+                        "(a rerun tests again without training; default: a temporary folder)")
     args = parser.parse_args()
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU mocap) is needed")
@@ -177,9 +179,12 @@ def main() -> None:
     fv = rig.face_vertices
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="facedyn-cross-sim-") as scratch:
-        work = Path(scratch)
-        rig_path = write_blendshape_rig(rig, work / "rig.usda")
-        seconds = train(work, rig_path, args)
+        work = args.work or Path(scratch)
+        work.mkdir(parents=True, exist_ok=True)
+        if (work / "H.synthesis").is_file():
+            seconds = "reused from an earlier run in --work"
+        else:
+            seconds = train(work, write_blendshape_rig(rig, work / "rig.usda"), args)
         corpus = json.loads((work / "corpus" / "corpus.json").read_text())
         trained = [t for t in corpus["takes"] if not t["name"].startswith("dialog")]
         emit(case="training", simulator="facedyn.sim.tissue, random TissueParams per take", rig=rig.name,
@@ -196,7 +201,8 @@ def main() -> None:
             t0 = time.perf_counter()
             sims = dict(zip(specs, simulate_takes(rig, list(specs.values()), params, jobs=args.jobs)))
             simulated = time.perf_counter() - t0
-            takes = {label: TestTake(sim, rig, work / actor_name / label, work / "actor.usda", work) for label, sim in sims.items()}
+            tests = Path(scratch) / actor_name  # test takes are never kept: a rerun simulates them afresh
+            takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work) for label, sim in sims.items()}
             for label in ("dialog_walk", "dialog_run", "platform_8hz"):
                 emit(**removal_case(actor_name, label, takes[label], models, fv))
             emit(**synthesis_case(actor_name, takes["dialog_hop"], h_model, fv))
