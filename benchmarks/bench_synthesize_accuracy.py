@@ -27,7 +27,9 @@ dynamics' RMS:
 - retargeting (Fig. 10): A's dialog under CMU hopping moved onto B: B's H driven by A's
   skull trajectory aligned to B's rest frame, against the naive transfer of A's true
   per-vertex dynamics, both against B simulated under that motion;
-- training: F's and H's training time on 2 CPU cores (``--device cpu``).
+- training: F's and H's training time on 2 CPU cores (``--device cpu``). Both Fs train
+  for 40 epochs on the same subsample by default (equal budgets; the training case prints
+  both), every H for ``--h-epochs``.
 
     python benchmarks/bench_synthesize_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--actors A B] [--skull-features acceleration]
 
@@ -209,7 +211,7 @@ def main() -> None:
     parser.add_argument("--expressions", type=int, default=10)
     parser.add_argument("--b-expressions", type=int, default=5, help="held expressions in actor B's corpus")
     parser.add_argument("--seconds", type=float, default=3.0)
-    parser.add_argument("--f-epochs", type=int, default=20)
+    parser.add_argument("--f-epochs", type=int, default=40, help="epochs of the paper's F (default: the F on truth's budget, so the two compare at equal budgets)")
     parser.add_argument("--f-subsample", type=float, default=0.25)
     parser.add_argument("--f-truth-epochs", type=int, default=40,
                         help="epochs of actor A's F on true dynamics, which removes for the Hs on truth in re-synthesis (0: the paper's F removes for all)")

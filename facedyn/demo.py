@@ -2,10 +2,14 @@
 
 1. simulate a small corpus (the papers' protocol at demo scale) with known truth;
 2. simulate a new performance (a held smile while walking, with tracking noise);
-3. stabilize it (mode pursuit, and the three-point baseline for comparison);
-4. train the removal network F on the corpus and remove the performance's dynamics;
-5. train the synthesis network H and re-synthesize the dynamics under the take's own
-   motion and under a new motion (hopping), which is also simulated for the truth;
+3. make the actor from the rig (`usdfacedyn actor`: the skull frame the corpus and the
+   models share) and stabilize the take into it (mode pursuit with --actor, and the
+   three-point baseline for comparison);
+4. train the removal network F the recommended way (the corpus's true dynamics, skull
+   landmark accelerations over t-30..t+10) and remove the performance's dynamics;
+5. train the synthesis network H on that F's quasistatic output and re-synthesize the
+   dynamics under the take's own motion and under a new motion (hopping), which is also
+   simulated for the truth;
 6. write the layered take, a contact sheet and EXR uv offset maps, and print a summary.
 
 Every step goes through the same processors as the CLI (facedyn.processors.runner), so the
@@ -34,6 +38,19 @@ SCALES = {
 
 
 NOISE_CM = 0.01  # tracking noise of every simulated take, cm per coordinate (a good marker-less capture)
+
+# What each row of the summary measures (printed under the table).
+MEANINGS = {
+    "removed offsets vs true offsets": "what F removed against the simulator's true dynamics: the removal figure (0% perfect, 100% = removing nothing)",
+    "removed vs true quasistatic": "the quasistatic take against the true quasistatic skin; includes the capture's tracking noise, which removal leaves",
+    "captured vs true quasistatic (do nothing)": "the stabilized capture itself against the true quasistatic skin: the score of not removing (about 100%)",
+    "re-synthesized vs captured (own motion)": "H re-synthesizing the removed dynamics under the take's own skull motion, against the capture",
+    "synthesized vs simulated truth (hop)": "H's dynamics under a new motion (hopping) against the simulator's dynamics for that motion: the synthesis figure",
+}
+PATH = ("recommended path: actor from the rig (the skull frame), take stabilized into it (solved skull, not the true one); "
+        "F trained on the corpus's true dynamics with skull landmark accelerations; H trained on that F's output. "
+        "Test take and corpus come from the same simulator (facedyn.sim.tissue, default tissue): an in-simulator figure; "
+        "benchmarks/bench_cross_sim.py measures a physics training never saw.")
 
 
 class Demo:
@@ -74,7 +91,8 @@ class Demo:
         truth = self.step("simulate a new performance", lambda: simulate_take(rig, spec))
         write_simulated_take(take_dir, truth, rig)
         root = take_dir / "take.usda"
-        self.stabilize(root, take_dir, truth, rig)
+        actor = self.step("make the actor from the rig", lambda: self.make_actor(rig))
+        self.stabilize(root, take_dir, truth, rig, actor)
         models = self.output / "models"
         models.mkdir(exist_ok=True)
         self.remove(root, take_dir, truth, rig, corpus, models)
@@ -89,11 +107,21 @@ class Demo:
         request = Request(list(inputs), output, params=params, attach=attach)
         return execute(registry.load(processor_name), request, Progress.silent())
 
-    def stabilize(self, root, take_dir, truth, rig):
+    def make_actor(self, rig) -> Path:
+        """The rig as a UsdSkel file and the actor made from it, as a studio makes its actor."""
+        from facedyn.usd.rig import write_blendshape_rig
+
+        rig_path = self.rig_path or write_blendshape_rig(rig, self.output / "rig.usda")
+        actor = self.output / "actor.usda"
+        self.process("actor", [rig_path], actor)
+        return actor
+
+    def stabilize(self, root, take_dir, truth, rig, actor: Path):
         from facedyn.evaluation import stabilization_errors
         from facedyn.usd.take import read_take
 
-        self.step("stabilize (mode pursuit)", lambda: self.process("stabilize", [root], take_dir / "stabilized.usdc", root))
+        self.step("stabilize (mode pursuit, actor frame)",
+                  lambda: self.process("stabilize", [root], take_dir / "stabilized.usdc", root, actor=actor))
         scratch = take_dir / "baselines"
         scratch.mkdir(exist_ok=True)
         self.step("stabilize (three-point baseline)",
@@ -113,8 +141,8 @@ class Demo:
 
         model = models / "actor.removal"
         report = self.step("train removal network F", lambda: self.process(
-            "train-removal", [corpus], model, skull="truth", epochs=self.settings["f_epochs"],
-            subsample=self.settings["f_subsample"], exclude="dialog*"))["summary"]
+            "train-removal", [corpus], model, skull="truth", target="truth", skull_features="acceleration",
+            epochs=self.settings["f_epochs"], subsample=self.settings["f_subsample"], exclude="dialog*"))["summary"]
         self.step("remove dynamics", lambda: self.process("remove", [root], take_dir / "quasistatic.usdc", root, model=str(model)))
         removed, _ = read_take(root)
         self.removed = removed
@@ -178,7 +206,7 @@ class Demo:
         self.results["offset_maps"] = [str(p) for p in written]
 
     def summary(self, root: Path) -> dict:
-        return {"take": str(root), "scale": self.scale, "results": self.results, "timings_s": self.timings,
+        return {"take": str(root), "scale": self.scale, "path": PATH, "results": self.results, "timings_s": self.timings,
                 "total_s": round(sum(self.timings.values()), 1)}
 
 
@@ -207,6 +235,10 @@ def format_summary(summary: dict) -> str:
         for name, e in r[section].items():
             if "fraction" in (e or {}):
                 lines.append(f"  {name:<42} {e['residual_rms_cm']:>12.4f} {e['fraction']:>8.0%}")
+    lines.append("")
+    lines.append("what the rows mean (RMS over the face, frames and axes, as a fraction of the true dynamics' RMS):")
+    lines += [f"  {name}: {meaning}" for name, meaning in MEANINGS.items()]
+    lines.append(PATH)
     lines.append("")
     lines.append("timings (s): " + ", ".join(f"{k} {v}" for k, v in summary["timings_s"].items()))
     lines.append(f"total: {summary['total_s']} s")

@@ -8,9 +8,15 @@ import json
 import torch
 
 from facedyn.cli import main
+from facedyn.demo import format_summary
+from facedyn.dynamics.modelfile import load_model
+from facedyn.dynamics.skull_motion import NAMED
+from facedyn.processors.training_inputs import take_skull_frame
+from facedyn.usd.actor import read_actor
+from facedyn.usd.take import read_take
 
 
-def test_the_demo_runs_end_to_end_and_beats_doing_nothing(tmp_path, capsys):
+def test_the_demo_runs_the_recommended_path_end_to_end_and_beats_doing_nothing(tmp_path, capsys):
     threads = torch.get_num_threads()
     try:
         assert main(["demo", "-o", str(tmp_path / "demo"), "--json"]) == 0
@@ -24,6 +30,14 @@ def test_the_demo_runs_end_to_end_and_beats_doing_nothing(tmp_path, capsys):
     assert remove["removed vs true quasistatic"]["fraction"] < remove["captured vs true quasistatic (do nothing)"]["fraction"]
     assert results["synthesize"]["re-synthesized vs captured (own motion)"]["fraction"] < 0.5
     out = tmp_path / "demo"
+    # the recommended path: F on true dynamics with skull accelerations, H through that F, the actor's frame
+    removal = load_model(out / "models" / "actor.removal")
+    assert removal.info["training"]["config"]["target"] == "truth" and removal.skull_motion == NAMED["acceleration"]
+    synthesis = load_model(out / "models" / "actor.synthesis")
+    assert synthesis.face.samples.tolist() == removal.face.samples.tolist()  # H learned from that F's output
+    stabilized, _ = read_take(out / "take" / "take.usda")
+    assert take_skull_frame(stabilized) == read_actor(out / "actor.usda").skull_frame == removal.info["skull_frame"]
+    assert "what the rows mean" in format_summary(summary)
     assert (out / "take" / "take.usda").is_file() and (out / "contact_sheet.png").is_file()
     assert results["offset_maps"] and all(p.endswith(".exr") for p in results["offset_maps"])
     assert json.loads((out / "summary.json").read_text())["results"].keys() == results.keys()

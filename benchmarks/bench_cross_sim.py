@@ -1,0 +1,214 @@
+"""The cross-simulator protocol (issue 18): train on facedyn's simulator, test on another physics.
+
+Training, all through the console as a studio runs it (the built-in face, written as a
+UsdSkel rig so that `synth --rig` and `actor --from rig` read the same file):
+  usdfacedyn synth --rig rig.usda --scale demo --randomize-tissue take --extra-motions --noise 0.01 --data DATA
+  usdfacedyn actor rig.usda                          (the actor frame: the rig's own space)
+  usdfacedyn train-removal   (three F variants, equal budgets: --epochs/--subsample below)
+      F_truth_acc: true dynamics, landmark accelerations over t-30..t+10 (the recommended F)
+      F_truth_vel: true dynamics, the paper's landmark velocities over t-10..t+10
+      F_paper:     the paper's moving-average targets and velocities
+  usdfacedyn train-synthesis --quasistatic F_truth_acc (H through the recommended F)
+The corpus's dialog takes (CMU 131_01 walking, 131_03 hopping) are left out of training
+(--exclude 'dialog*'); its takes have random spring-membrane tissue per take (TissueParams).
+
+Testing: ``--actors`` actors with volumetric hyperelastic tissue (facedyn.sim.volumetric,
+another family) drawn by VolumetricParams.random from seeds training never used; each
+actor's takes carry tracker noise (correlated in time and over the surface, pops, dropped
+frames: facedyn.sim.noise), are exported as plain mesh caches (metres, Z up, frame 1001,
+no truth, no rest) and go through `import`, `stabilize --actor actor.usda`, `remove`,
+`synthesize` with the defaults. Test takes (Live Link speech, never in training):
+  - dialog under real walking (CMU 131_02) and a procedural run (training has no run);
+  - a held smile on a 8 Hz platform (training has 7, 9 and 11 Hz);
+  - synthesis under new motion: the dialog under CMU 131_03 hopping; H synthesizes the
+    dynamics from F's quasistatic output and the solved skull; against the true dynamics.
+Every figure is RMS over the face vertices as a fraction of the true dynamics' RMS
+("do nothing" = 100%): ``solved`` = the real path (solved skull, actor frame); ``true_skull``
+= F (or H) given the simulator's true skull and the tracked points in true skull space: an
+upper bound, no capture has it; ``moving_average`` = the 21-frame moving average baseline
+on the solved take. One JSON object per case.
+
+    .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--work DIR]
+
+A small-budget protocol (demo-scale corpus without Live Link performances, short takes,
+few epochs), sized for 10-15 minutes on 2 idle cores; measured on 2 cores shared with
+other jobs (load average about 8): training 39 minutes, testing two actors 4.5 minutes.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from facedyn.dynamics.removal import remove_dynamics
+from facedyn.dynamics.synthesis import synthesize_dynamics
+from facedyn.dynamics.targets import dynamic_offsets
+from facedyn.evaluation import residual_fraction
+from facedyn.geometry import quaternion
+from facedyn.sim.corpus import SPEECH, TakeSpec, simulate_takes
+from facedyn.sim.default_face import default_face
+from facedyn.sim.noise import TrackerNoise, add_tracker_noise
+from facedyn.sim.volumetric import VolumetricParams
+from plain_capture import usdfacedyn, write_plain_cache
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+TRACKER = TrackerNoise(iid_cm=0.01, temporal_cm=0.004, spatial_cm=0.002, pop_rate=1.0, pop_cm=0.3, drop_rate=0.01)
+ACTOR_SEEDS = (1801, 1802, 1803, 1804)  # VolumetricParams.random seeds: no training take draws volumetric tissue
+F_VARIANTS = {  # name: (train-removal --target, --skull-features)
+    "F_truth_acc": ("truth", "acceleration"),
+    "F_truth_vel": ("truth", "velocity"),
+    "F_paper": ("moving-average", "velocity"),
+}
+RECOMMENDED = "F_truth_acc"
+
+
+def emit(**fields) -> None:
+    print(json.dumps(fields), flush=True)
+
+
+def test_specs(seconds: float, seed: int) -> dict[str, TakeSpec]:
+    speech = str(DATA / "livelink-face" / SPEECH)
+    return {
+        "dialog_walk": TakeSpec("dialog_cmu_131_02", f"bvh:{DATA / 'cmu-mocap' / '131_02.bvh'}", dialog=speech, duration_s=seconds, seed=seed + 1),
+        "dialog_run": TakeSpec("dialog_run", "run", dialog=speech, duration_s=seconds, seed=seed + 2),
+        "platform_8hz": TakeSpec("smile_platform8hz", "platform:8", "smile", duration_s=seconds, seed=seed + 3),
+        "dialog_hop": TakeSpec("dialog_cmu_131_03", f"bvh:{DATA / 'cmu-mocap' / '131_03.bvh'}", dialog=speech, duration_s=seconds, seed=seed + 4),
+    }
+
+
+def train(work: Path, rig_path: Path, args) -> dict:
+    """The corpus, the actor and the models, through the console; seconds per step."""
+    seconds = {}
+
+    def step(name, *command):
+        t0 = time.perf_counter()
+        usdfacedyn(*command)
+        seconds[name] = round(time.perf_counter() - t0, 1)
+
+    step("synth", "synth", "-o", str(work / "corpus"), "--rig", str(rig_path), "--scale", "demo", "--randomize-tissue", "take",
+         "--extra-motions", "true", "--noise", "0.01", "--data", str(DATA), "--jobs", str(args.jobs))
+    step("actor", "actor", str(rig_path), "-o", str(work / "actor.usda"))
+    budget = ("--epochs", str(args.epochs), "--subsample", str(args.subsample), "--skull", "truth", "--exclude", "dialog*", "--device", "cpu")
+    for name, (target, features) in F_VARIANTS.items():
+        step(name, "train-removal", str(work / "corpus"), "-o", str(work / f"{name}.removal"), "--target", target,
+             "--skull-features", features, *budget)
+    step("H", "train-synthesis", str(work / "corpus"), "-o", str(work / "H.synthesis"), "--quasistatic", str(work / f"{RECOMMENDED}.removal"),
+         "--epochs", str(args.h_epochs), "--skull", "truth", "--exclude", "dialog*", "--device", "cpu")
+    return seconds
+
+
+class TestTake:
+    """A volumetric take's truth, its plain capture through the console, and the layers read back."""
+
+    def __init__(self, sim, rig, folder: Path, actor: Path, models: Path):
+        from facedyn.usd.take import read_layers, read_take
+
+        self.truth = sim
+        fps = sim.fps
+        tracked = add_tracker_noise(sim.world_points(), fps, TRACKER, rig.neutral, seed=sim.spec.seed)
+        rot = quaternion.to_matrix(sim.skull_orient)
+        # the tracked points in the true skull's space (for the upper bound)
+        self.tracked_true_skull = np.einsum("fji,fnj->fni", rot, tracked.points - sim.skull_translate[:, None]).astype(np.float32)
+        folder.mkdir(parents=True)
+        write_plain_cache(folder / "tracked.usdc", tracked.points, rig.topology.face_vertex_counts, rig.topology.face_vertex_indices, fps)
+        root = folder / "take.usda"
+        usdfacedyn("import", str(folder / "tracked.usdc"), "-o", str(folder / "capture.usdc"))
+        usdfacedyn("stabilize", str(root), "-o", str(folder / "stabilized.usdc"), "--attach", str(root), "--actor", str(actor))
+        self.stabilized, _ = read_take(root)
+        self.removed = {}
+        for name in F_VARIANTS:
+            layer = folder / f"quasistatic.{name}.usdc"
+            usdfacedyn("remove", str(root), "-o", str(layer), "--model", str(models / f"{name}.removal"))
+            self.removed[name] = read_layers([layer, root])
+        layer = folder / "quasistatic.usdc"
+        usdfacedyn("remove", str(root), "-o", str(layer), "--attach", str(root), "--model", str(models / f"{RECOMMENDED}.removal"))
+        usdfacedyn("synthesize", str(root), "-o", str(folder / "synthesized.usdc"), "--model", str(models / "H.synthesis"))
+        self.synthesized = read_layers([folder / "synthesized.usdc", root])
+
+
+def score(estimate, truth, fv) -> float:
+    return round(residual_fraction(estimate, truth, truth, fv)["fraction"], 3)
+
+
+def removal_case(actor_name: str, label: str, take: TestTake, models: dict, fv) -> dict:
+    truth = take.truth.offsets
+    solved = take.stabilized.points
+    result = {"case": "removal", "actor": actor_name, "test": label, "frames": len(truth),
+              "dynamics_rms_mm": round(residual_fraction(truth, truth, truth, fv)["dynamics_rms_cm"] * 10, 3),
+              "do_nothing": 1.0, "moving_average": score(dynamic_offsets(solved[:, fv], space="skull"), truth[:, fv], None)}
+    for name, performance in take.removed.items():
+        result[f"{name}_solved"] = score(performance.offsets, truth, fv)
+        _, offsets = remove_dynamics(take.tracked_true_skull, take.truth.skull_translate, take.truth.skull_orient, take.truth.fps, models[name])
+        result[f"{name}_true_skull_upper_bound"] = score(offsets, truth, fv)
+    return result
+
+
+def synthesis_case(actor_name: str, take: TestTake, h_model, fv) -> dict:
+    truth = take.truth.offsets
+    sim = take.truth
+    _, upper = synthesize_dynamics(sim.quasistatic, sim.skull_translate, sim.skull_orient, sim.fps, h_model)
+    return {"case": "synthesis under new motion (CMU 131_03 hop)", "actor": actor_name, "frames": len(truth),
+            "dynamics_rms_mm": round(residual_fraction(truth, truth, truth, fv)["dynamics_rms_cm"] * 10, 3),
+            "no_dynamics": 1.0,
+            "H_solved": score(take.synthesized.offsets, truth, fv),
+            "synthesized_rms_mm": round(residual_fraction(take.synthesized.offsets, 0 * truth, truth, fv)["residual_rms_cm"] * 10, 3),
+            "H_true_skull_true_quasistatic_upper_bound": score(upper, truth, fv)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--actors", type=int, default=2, choices=range(1, len(ACTOR_SEEDS) + 1))
+    parser.add_argument("--epochs", type=int, default=8, help="epochs of every F variant (equal budgets)")
+    parser.add_argument("--subsample", type=float, default=0.5, help="fraction of pairs per epoch, every F variant")
+    parser.add_argument("--h-epochs", type=int, default=20)
+    parser.add_argument("--seconds", type=float, default=1.5, help="length of each test take")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--work", type=Path, help="keep the corpus, actor and models in this folder and reuse them when there "
+                        "(a rerun tests again without training; default: a temporary folder)")
+    args = parser.parse_args()
+    if not DATA.is_dir():
+        raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU mocap) is needed")
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.usd.rig import write_blendshape_rig
+
+    rig = default_face()
+    fv = rig.face_vertices
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="facedyn-cross-sim-") as scratch:
+        work = args.work or Path(scratch)
+        work.mkdir(parents=True, exist_ok=True)
+        if (work / "H.synthesis").is_file():
+            seconds = "reused from an earlier run in --work"
+        else:
+            seconds = train(work, write_blendshape_rig(rig, work / "rig.usda"), args)
+        corpus = json.loads((work / "corpus" / "corpus.json").read_text())
+        trained = [t for t in corpus["takes"] if not t["name"].startswith("dialog")]
+        emit(case="training", simulator="facedyn.sim.tissue, random TissueParams per take", rig=rig.name,
+             takes=len(trained), frames=int(sum(t.get("frames", 0) for t in trained)), f_epochs=args.epochs, f_subsample=args.subsample,
+             h_epochs=args.h_epochs, seconds=seconds, budget="every F variant: the same corpus, epochs and subsample")
+        models = {name: load_model(work / f"{name}.removal") for name in F_VARIANTS}
+        h_model = load_model(work / "H.synthesis")
+        for k, seed in enumerate(ACTOR_SEEDS[: args.actors]):
+            params = VolumetricParams.random(seed, substeps=2)  # one step per frame diverges on CMU hopping for some actors
+            actor_name = f"volumetric_{seed}"
+            emit(case="test actor", actor=actor_name, simulator="facedyn.sim.volumetric", soft_hz=round(params.soft_hz, 2),
+                 damping_ratio=round(params.damping_ratio, 3), thickness_cm=round(params.thickness_cm, 2), nonlinearity=round(params.nonlinearity, 2))
+            specs = test_specs(args.seconds, 5000 + 10 * k)
+            t0 = time.perf_counter()
+            sims = dict(zip(specs, simulate_takes(rig, list(specs.values()), params, jobs=args.jobs)))
+            simulated = time.perf_counter() - t0
+            tests = Path(scratch) / actor_name  # test takes are never kept: a rerun simulates them afresh
+            takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work) for label, sim in sims.items()}
+            for label in ("dialog_walk", "dialog_run", "platform_8hz"):
+                emit(**removal_case(actor_name, label, takes[label], models, fv))
+            emit(**synthesis_case(actor_name, takes["dialog_hop"], h_model, fv))
+            emit(case="test timing", actor=actor_name, simulate_seconds=round(simulated, 1), total_seconds=round(time.perf_counter() - started, 1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,187 @@
+"""`usdfacedyn evaluate`: truth-free diagnostics of removal (and synthesis) on real captures.
+
+Reads takes after `remove` (the quasistatic take: the layers below the synthesized role,
+with the removed offsets), and writes a folder with `report.json` (the numbers) and
+`diagnostics.png` (the spectra and the held expression's deviation over time). Per take:
+the removed offsets' spectrum against the skull's (facedyn.dynamics.diagnostics), the
+fraction of the capture's motion left at the skull's frequency (a platform take's
+frequency: give one training never saw for a held-out check), and with `--synthesis`
+the re-synthesis residual against the capture. With `--held-expression`, the takes hold
+one expression under different motions: the spread of its shape after removal against
+the spread of the capture.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from facedyn.errors import UsageError
+from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
+from facedyn.progress import Progress
+
+QUASISTATIC_BELOW = "synthesized"  # evaluate reads what remove wrote: everything below the synthesized role
+
+
+class EvaluateProcessor(Processor):
+    name = "evaluate"
+    version = "1"
+    summary = "truth-free diagnostics of removed dynamics on captures (numbers and a plot)"
+    reads = Reads("takes", metavar="TAKE", help="take roots after remove (one or more)")
+    writes = Writes("folder", metavar="DIR", help="the folder for report.json and diagnostics.png")
+    parameters = (
+        Parameter("held_expression", bool, False, "the takes hold one expression under different motions: report its spread"),
+        Parameter("skip", float, 0.5, "seconds at the start of each take left out of the spread (the expression easing in)",
+                  minimum=0.0, maximum=60.0, metavar="S"),
+        Parameter("frequency", float, None, "the frequency (Hz) whose residual to report (default: the skull motion's peak)",
+                  above=0.0, maximum=1000.0, metavar="HZ"),
+        Parameter("synthesis", Path, None, "a synthesis model: also re-synthesize each take under its own motion", metavar="MODEL"),
+    )
+
+    def prepare(self, request: Request) -> Plan:
+        from facedyn.dynamics.modelfile import load_model
+        from facedyn.usd.errors import TakeError
+        from facedyn.usd.take import read_take_below
+
+        if not request.inputs:
+            raise UsageError("give at least one TAKE")
+        params = request.params
+        takes = []
+        for path in request.inputs:
+            perf, _ = read_take_below(path, QUASISTATIC_BELOW, frames=request.frames)
+            if perf.offsets is None:
+                raise TakeError(f"{path}: no removed offsets (primvars:facedyn:dynamicsOffset); run `usdfacedyn remove` first")
+            if perf.frame_count < 8:
+                raise TakeError(f"{path}: {perf.frame_count} frames; the diagnostics need at least 8")
+            if takes and perf.topology.fingerprint() != takes[0][1].topology.fingerprint():
+                raise TakeError(f"{path}: its mesh topology differs from {request.inputs[0]}'s; evaluate one actor's takes")
+            takes.append((Path(path), perf))
+        if params["held_expression"] and len(takes) < 2:
+            raise UsageError("--held-expression compares takes: give at least two")
+        model = None
+        if params["synthesis"] is not None:
+            first = takes[0][1]
+            model = load_model(params["synthesis"], topology=first.topology, fps=first.fps)
+            if model.kind != "synthesis":
+                raise UsageError(f"--synthesis {params['synthesis']}: a {model.kind} model; this needs a synthesis model")
+        description = {"takes": [str(p) for p, _ in takes], "frames": [p.frame_count for _, p in takes],
+                       "held_expression": params["held_expression"], "synthesis": str(params["synthesis"] or "")}
+        return Plan(description, (request, takes, model))
+
+    def run(self, plan: Plan, progress: Progress) -> FolderOutput:
+        request, takes, model = plan.state
+        params = request.params
+        progress.start("evaluate takes", len(takes))
+        per_take = []
+        for path, perf in takes:
+            per_take.append(take_diagnostics(path, perf, params["frequency"], model))
+            progress.advance()
+        progress.finish()
+        report = {"takes": [{k: v for k, v in t.items() if k != "plot"} for t in per_take]}
+        if params["held_expression"]:
+            report["held_expression"] = spread_diagnostics(takes, params["skip"])
+        output = Path(request.output)
+        output.mkdir(parents=True, exist_ok=True)
+        (output / "report.json").write_text(json.dumps(report, indent=2, sort_keys=True) + "\n")
+        write_plot(output / "diagnostics.png", per_take, takes, params["skip"] if params["held_expression"] else None)
+        return FolderOutput({"report": str(output / "report.json"), "plot": str(output / "diagnostics.png"), **_headline(report)})
+
+    def describe(self, report: dict) -> str:
+        summary = report["summary"]
+        lines = [f"report: {summary['report']}", f"plot: {summary['plot']}"]
+        lines += [f"{k}: {v}" for k, v in summary.items() if k not in ("report", "plot")]
+        return "\n".join(lines)
+
+
+def face_vertices(perf) -> np.ndarray:
+    return np.arange(perf.point_count) if perf.face_vertices is None else np.asarray(perf.face_vertices)
+
+
+def landmarks_of(perf) -> np.ndarray:
+    from facedyn.dynamics.samples import default_landmarks
+
+    if perf.landmarks is not None:
+        return perf.landmarks
+    return default_landmarks(perf.rest_points if perf.rest_points is not None else perf.points[0])
+
+
+def take_diagnostics(path: Path, perf, frequency: float | None, model) -> dict:
+    """One take's numbers (rounded for the report) and its spectra (for the plot)."""
+    from facedyn.dynamics import diagnostics
+
+    fv = face_vertices(perf)
+    translate, orient = perf.skull()
+    captured = perf.points + perf.offsets
+    spectrum = diagnostics.offset_spectrum(perf.offsets, translate, orient, landmarks_of(perf), perf.fps, fv)
+    hz = frequency or spectrum["skull_peak_hz"]
+    result = {
+        "take": str(path), "frames": perf.frame_count, "fps": perf.fps,
+        "removed_rms_mm": round(float(np.sqrt(np.mean(np.sum(perf.offsets[:, fv] ** 2, axis=-1)))) * 10, 4),
+        "offsets_peak_hz": round(spectrum["offsets_peak_hz"], 2), "skull_peak_hz": round(spectrum["skull_peak_hz"], 2),
+        "offsets_below_1hz_fraction": round(spectrum["offsets_below_1hz_fraction"], 4),
+        "residual_frequency_hz": round(hz, 2),
+        "residual_at_frequency": round(diagnostics.residual_at_frequency(perf.points, captured, perf.fps, hz, fv), 4),
+        "plot": spectrum["spectra"],
+    }
+    if model is not None:
+        from facedyn.dynamics.synthesis import synthesize_dynamics
+
+        resynthesized, _ = synthesize_dynamics(perf.points, translate, orient, perf.fps, model)
+        result["resynthesis_residual"] = round(diagnostics.resynthesis_residual(captured, resynthesized, perf.points, fv), 4)
+    return result
+
+
+def spread_diagnostics(takes: list, skip_s: float) -> dict:
+    """The held expression's spread over the takes, after removal and as captured."""
+    from facedyn.dynamics.diagnostics import held_expression_spread
+
+    first = takes[0][1]
+    fv, skip = face_vertices(first), int(round(skip_s * first.fps))
+    if any(perf.frame_count <= skip for _, perf in takes):
+        raise UsageError(f"--skip {skip_s:g}: leaves no frame of the shortest take")
+    after = held_expression_spread([perf.points for _, perf in takes], fv, skip)
+    before = held_expression_spread([perf.points + perf.offsets for _, perf in takes], fv, skip)
+    return {"after_removal_mm": {k.removesuffix("_cm"): round(v * 10, 4) for k, v in after.items()},
+            "captured_mm": {k.removesuffix("_cm"): round(v * 10, 4) for k, v in before.items()},
+            "per_frame_ratio": round(after["per_frame_cm"] / before["per_frame_cm"], 4) if before["per_frame_cm"] > 0 else None}
+
+
+def _headline(report: dict) -> dict:
+    headline = {"mean_residual_at_frequency": round(float(np.mean([t["residual_at_frequency"] for t in report["takes"]])), 4)}
+    if "held_expression" in report:
+        headline["held_expression_spread_ratio"] = report["held_expression"]["per_frame_ratio"]
+    return headline
+
+
+def write_plot(path: Path, per_take: list[dict], takes: list, skip_s: float | None) -> Path:
+    """Spectra of each take's removed offsets beside its skull's; with a held expression, each
+    take's per-frame distance from the expression's mean shape, captured and after removal."""
+    from facedyn.preview.images import write_image
+    from facedyn.preview.plot import Series, blank, line_chart
+
+    panels = 2 if skip_s is None else 3
+    width, height = 900, 300
+    image = blank(height * panels, width)
+    offsets = [Series(_label(Path(t["take"])), t["plot"]["hz"], t["plot"]["offsets"]) for t in per_take]
+    skull = [Series(_label(Path(t["take"])), t["plot"]["skull_hz"], t["plot"]["skull"]) for t in per_take]
+    line_chart(image, (0, 0, width, height), "removed offsets: power spectrum (normalized)", offsets, "Hz", (0.0, 20.0), log_y=True)
+    line_chart(image, (0, height, width, 2 * height), "skull landmark accelerations: power spectrum (normalized)", skull, "Hz",
+               (0.0, 20.0), log_y=True)
+    if skip_s is not None:
+        fv = face_vertices(takes[0][1])
+        skip = int(round(skip_s * takes[0][1].fps))
+        mean = np.concatenate([perf.points[skip:, fv] for _, perf in takes]).mean(axis=0)
+        series = []
+        for take_path, perf in takes:
+            seconds = np.arange(skip, perf.frame_count) / perf.fps
+            for label, points in (("captured", perf.points + perf.offsets), ("removed", perf.points)):
+                distance = np.sqrt(np.mean(np.sum((points[skip:, fv] - mean) ** 2, axis=-1), axis=1)) * 10
+                series.append(Series(f"{_label(take_path)} {label}", seconds, distance))
+        line_chart(image, (0, 2 * height, width, 3 * height), "held expression: RMS distance from its mean shape (mm)", series, "s")
+    return write_image(path, image)
+
+
+def _label(take: Path) -> str:
+    """A take's name in the plot: its folder (take roots are named take.usda)."""
+    return take.parent.name or take.stem
