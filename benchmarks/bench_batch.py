@@ -25,7 +25,7 @@ from facedyn.batch.cluster import open_client, run_steps
 from facedyn.batch.plan import Models, plan_batch
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import save_model
-from facedyn.dynamics.training import Take, TrainConfig, train_removal
+from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
 from facedyn.usd.corpus import write_simulated_take
@@ -46,7 +46,7 @@ def make_shots(folder: Path, takes: int, seconds: float) -> tuple[list[str], Pat
         write_simulated_take(folder / "sim" / sim.spec.name, sim, rig)
         captures.append(str(shutil.copy(folder / "sim" / sim.spec.name / "capture.usdc", folder / f"{sim.spec.name}.usdc")))
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices)
-    training = [Take(s.spec.name, s.captured, s.fps, s.skull_translate, s.skull_orient, "skull", s.offsets) for s in sims[:2]]
+    training = [TrainingSequence(s.spec.name, s.captured, s.fps, s.skull_translate, s.skull_orient, "skull", s.offsets) for s in sims[:2]]
     model = save_model(train_removal(training, face, TrainConfig(epochs=1, target="truth")), folder / "actor.removal")
     return captures, model
 

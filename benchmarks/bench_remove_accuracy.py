@@ -39,7 +39,7 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
 from facedyn.dynamics.targets import dynamic_offsets
-from facedyn.dynamics.training import TARGETS, Take, TrainConfig, train_removal
+from facedyn.dynamics.training import TARGETS, TrainingSequence, TrainConfig, train_removal
 from facedyn.processors.synth import load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, SPEECH, TakeSpec, held_expressions, simulate_takes
@@ -81,8 +81,8 @@ class Kept:
         fv = face_vertices
         self.noise = (take.captured[:, fv] - take.quasistatic[:, fv] - take.offsets[:, fv]) if test else None
 
-    def as_take(self) -> Take:
-        return Take(self.name, self.captured, self.fps, self.translate, self.orient, "skull", self.dynamics)
+    def as_take(self) -> TrainingSequence:
+        return TrainingSequence(self.name, self.captured, self.fps, self.translate, self.orient, "skull", self.dynamics)
 
 
 def evaluate(model, group: list[Kept], face_vertices) -> dict:

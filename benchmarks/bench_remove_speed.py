@@ -84,7 +84,7 @@ def removal_with_io(rig, skull_points, translate, orient, model, repeats: int) -
     from facedyn.processors.base import Request
     from facedyn.processors.runner import execute
     from facedyn.progress import Progress
-    from facedyn.sim.corpus import SimulatedTake, TakeSpec
+    from facedyn.sim.corpus import SimulatedPerformance, TakeSpec
     from facedyn.usd.corpus import write_simulated_take
     from facedyn.usd.layers import write_take_root
     from facedyn.usd.timing import Timing
@@ -93,7 +93,7 @@ def removal_with_io(rig, skull_points, translate, orient, model, repeats: int) -
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch) / "take"
         zeros = np.zeros_like(skull_points)
-        take = SimulatedTake(TakeSpec("speed", "still"), np.arange(1, frames + 1, dtype=np.float64), FPS, translate, orient,
+        take = SimulatedPerformance(TakeSpec("speed", "still"), np.arange(1, frames + 1, dtype=np.float64), FPS, translate, orient,
                              skull_points, zeros, zeros, np.zeros((frames, rig.expression_count), np.float32))
         write_simulated_take(folder, take, rig)
         root = write_take_root(folder / "stabilized.usda", [folder / "truth" / "skull.usdc", folder / "capture.usdc"],

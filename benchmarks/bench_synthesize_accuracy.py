@@ -53,7 +53,7 @@ from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
 from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
 from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
-from facedyn.dynamics.training import Take, TrainConfig, train_removal
+from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
 from facedyn.processors.synth import load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, TakeSpec, held_expressions, simulate_take, simulate_takes
@@ -112,7 +112,7 @@ def train_actor(actor: Actor, expressions: int, performances: int, seconds: floa
     takes, quasistatic = [], {}
     for sim in simulate_takes(actor.rig, specs, actor.tissue, jobs):
         name = sim.spec.name
-        takes.append(Take(name, spill(store / f"{name}.captured.npy", sim.captured), sim.fps, sim.skull_translate, sim.skull_orient,
+        takes.append(TrainingSequence(name, spill(store / f"{name}.captured.npy", sim.captured), sim.fps, sim.skull_translate, sim.skull_orient,
                           dynamics=spill(store / f"{name}.dynamics.npy", sim.offsets) if f_truth_epochs else None))
         quasistatic[name] = spill(store / f"{name}.quasistatic.npy", sim.quasistatic)
     simulated = time.perf_counter() - t0

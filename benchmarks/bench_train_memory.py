@@ -3,7 +3,7 @@
 Simulates a corpus of --takes * 4 walking / hopping / platform takes of the built-in face
 (--seconds each, 120 fps; `usdfacedyn synth`'s USD layout), then trains in a fresh
 subprocess per case, reading the takes lazily from USD one at a time (a generator of
-Take objects, true skull and true dynamics; H reads the true quasistatic shapes through a
+TrainingSequence objects, true skull and true dynamics; H reads the true quasistatic shapes through a
 lazy mapping) into the on-disk store, with at most --resident-mib of examples in memory.
 Each case prints one JSON object with the process's peak resident memory (VmHWM):
 
@@ -70,7 +70,7 @@ def child(corpus: Path, count: int, network: str, resident_mib: int, epochs: int
     from facedyn.dynamics.face import FaceSetup
     from facedyn.dynamics.skull_motion import SkullMotionInput
     from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
-    from facedyn.dynamics.training import Take, TrainConfig, train_removal
+    from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
     from facedyn.usd.corpus import read_truth
     from facedyn.usd.training_data import read_training_take, take_roots
 
@@ -83,7 +83,7 @@ def child(corpus: Path, count: int, network: str, resident_mib: int, epochs: int
     def takes():
         for root in roots:
             perf, _ = read_training_take(root, "truth")
-            take = Take.from_performance(perf, root.name)
+            take = TrainingSequence.from_performance(perf, root.name)
             yield replace(take, dynamics=read_truth(root).offsets) if network == "F" else take
 
     started = time.perf_counter()

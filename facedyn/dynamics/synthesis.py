@@ -38,7 +38,7 @@ from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
 from facedyn.dynamics.targets import moving_average
-from facedyn.dynamics.training import (ProgressCallback, Resident, Take, TrainConfig, fit_new_network, offset_errors, split_store,
+from facedyn.dynamics.training import (ProgressCallback, Resident, TrainingSequence, TrainConfig, fit_new_network, offset_errors, split_store,
                                        store_takes, streamed_normalization)
 from facedyn.performance import UVs
 
@@ -82,7 +82,7 @@ def train_synthesis(
     *,
     scratch: Path | str | None = None,
 ) -> DynamicsModel:
-    """Train network H on the takes (Take objects or dicts, any iterable) for the given face setup.
+    """Train network H on the takes (TrainingSequence objects or dicts, any iterable) for the given face setup.
 
     neighbourhoods: the stretch neighbourhoods of ``face.samples`` on ``face.rest_points``,
     or the mesh's uvs to build them from (2 mm differences). quasistatic: where y(t) comes
@@ -257,7 +257,7 @@ def _source_description(quasistatic) -> dict:
     return {"kind": "given"}
 
 
-def _prepare(take: Take, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndarray, quasistatic, config: TrainConfig, backend: str,
+def _prepare(take: TrainingSequence, face: FaceSetup, nb: UVNeighbourhoods, lengths: np.ndarray, quasistatic, config: TrainConfig, backend: str,
              skull_motion: SkullMotionInput) -> Iterator[dict[str, np.ndarray]]:
     """A take's frames away from its ends as store rows: inputs (skull features + 2S), targets (3S)."""
     pts = check_points(take.points, f"take {take.name!r} points")

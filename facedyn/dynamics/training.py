@@ -43,8 +43,8 @@ ProgressCallback = Callable[[int, float, "float | None"], None]  # (epoch, train
 
 
 @dataclass
-class Take:
-    """One training take as arrays: the whole mesh, its skull T(t) and frame rate."""
+class TrainingSequence:
+    """One take's arrays prepared for training (not a USD take): the whole mesh, its skull T(t), frame rate."""
 
     name: str
     points: np.ndarray  # (F, N, 3) skull space (space="skull") or world space ("world")
@@ -55,8 +55,8 @@ class Take:
     dynamics: np.ndarray | None = None  # (F, N, 3) known secondary dynamics, skull frame (a simulated take's truth)
 
     @classmethod
-    def coerce(cls, value) -> "Take":
-        """A Take from a Take or a dict with the same keys."""
+    def coerce(cls, value) -> "TrainingSequence":
+        """A TrainingSequence from a TrainingSequence or a dict with the same keys."""
         if isinstance(value, cls):
             return value
         if isinstance(value, dict):
@@ -64,10 +64,10 @@ class Take:
             if unknown:
                 raise ValueError(f"unknown take keys {sorted(unknown)}; a take has {sorted(cls.__dataclass_fields__)}")
             return cls(**value)
-        raise ValueError(f"a take must be a Take or a dict, got {type(value).__name__}")
+        raise ValueError(f"a take must be a TrainingSequence or a dict, got {type(value).__name__}")
 
     @classmethod
-    def from_performance(cls, performance: Performance, name: str) -> "Take":
+    def from_performance(cls, performance: Performance, name: str) -> "TrainingSequence":
         t, q = performance.skull()
         return cls(name, performance.points, performance.fps, t, q, "skull")
 
@@ -85,7 +85,7 @@ class TrainConfig:
     max_validation_pairs: int = 200_000  # per epoch's validation loss (a fixed subset)
     seed: int = 0
     device: str = "auto"  # "auto" = cuda when available, else cpu
-    target: str = "moving-average"  # F's targets: "moving-average" (the paper) or "truth" (Take.dynamics)
+    target: str = "moving-average"  # F's targets: "moving-average" (the paper) or "truth" (TrainingSequence.dynamics)
     skull_motion: SkullMotionInput | None = None  # skull features; None = the paper's B(t) over `window`
     resident_bytes: int = 1 << 30  # examples held in memory at once; a larger corpus streams from its store in chunks
 
@@ -217,7 +217,7 @@ def offset_errors(network: Network, examples, batch_size: int, unit: str) -> dic
     }
 
 
-def _prepare(take: Take, face: FaceSetup, config: TrainConfig, backend: str) -> Iterator[dict[str, np.ndarray]]:
+def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig, backend: str) -> Iterator[dict[str, np.ndarray]]:
     """A take's kept frames (away from its ends) as store rows, PREPARE_FRAMES at a time."""
     pts = check_points(take.points, f"take {take.name!r} points")
     if pts.shape[1] != face.point_count:
@@ -245,11 +245,11 @@ def _prepare(take: Take, face: FaceSetup, config: TrainConfig, backend: str) -> 
         yield {"skull": feats.skull if skull is None else skull[a:b], "skin": feats.skin, "targets": chunk_targets}
 
 
-def store_takes(takes: Iterable, prepare: Callable[[Take], Iterator[dict[str, np.ndarray]]],
+def store_takes(takes: Iterable, prepare: Callable[[TrainingSequence], Iterator[dict[str, np.ndarray]]],
                 scratch: Path | str | None = None) -> tuple[TrainingStore, list[dict], float]:
     """(a store of every take's prepared rows, the takes' descriptions, their one frame rate).
 
-    ``takes`` may be any iterable of Take objects or dicts, a generator included: each take
+    ``takes`` may be any iterable of TrainingSequence objects or dicts, a generator included: each take
     is prepared and appended before the next is read, so a caller that reads takes lazily
     holds one take in memory at a time.
     """
@@ -258,7 +258,7 @@ def store_takes(takes: Iterable, prepare: Callable[[Take], Iterator[dict[str, np
     fps = None
     try:
         for value in takes:
-            take = Take.coerce(value)
+            take = TrainingSequence.coerce(value)
             rate = check_fps(take.fps)
             if fps is None:
                 fps = rate
@@ -328,7 +328,7 @@ def train_removal(
     *,
     scratch: Path | str | None = None,
 ) -> DynamicsModel:
-    """Train network F on the takes (Take objects or dicts, any iterable) for the given face setup.
+    """Train network F on the takes (TrainingSequence objects or dicts, any iterable) for the given face setup.
 
     All takes must share one frame rate (the model's). Frames within ``config.trim`` of a
     take's ends are left out (their targets average over clamped windows). ``backend``

@@ -48,14 +48,14 @@ class TrainRemovalProcessor(Processor):
     def run(self, plan: Plan, progress: Progress) -> FileOutput:
         from facedyn.dynamics.modelfile import save_model
         from facedyn.dynamics.skull_motion import NAMED
-        from facedyn.dynamics.training import Take, TrainConfig, train_removal
+        from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
 
         request, takes, truths, face, frame = plan.state
         params = request.params
         config = TrainConfig(epochs=params["epochs"], subsample=params["subsample"], validation=validation_names(params),
                              seed=params["seed"], device=params["device"], target=params["target"],
                              skull_motion=NAMED[params["skull_features"]] if params["skull_features"] == "acceleration" else None)
-        training = [Take.from_performance(perf, name) for name, perf in takes]
+        training = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
         if truths is not None:
             training = [replace(take, dynamics=truths[take.name].offsets) for take in training]
         on_epoch, last = epoch_reporter(progress, f"train F ({len(takes)} takes)", config.epochs)

@@ -64,14 +64,14 @@ class TrainSynthesisProcessor(Processor):
         from facedyn.dynamics.modelfile import save_model
         from facedyn.dynamics.skull_motion import NAMED
         from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
-        from facedyn.dynamics.training import Take
+        from facedyn.dynamics.training import TrainingSequence
 
         request, takes, quasistatic, face, frame = plan.state
         params = request.params
         config = synthesis_config(epochs=params["epochs"], validation=validation_names(params), seed=params["seed"],
                                   device=params["device"], skull_motion=NAMED[params["skull_features"]])
         on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
-        model = train_synthesis([Take.from_performance(perf, name) for name, perf in takes], face, takes[0][1].uvs,
+        model = train_synthesis([TrainingSequence.from_performance(perf, name) for name, perf in takes], face, takes[0][1].uvs,
                                 quasistatic, config, on_epoch, backend=params["backend"])
         progress.finish()
         model.info.update(frame)

@@ -78,7 +78,7 @@ class TakeSpec:
 
 
 @dataclass
-class SimulatedTake:
+class SimulatedPerformance:
     """A take and its truth, all arrays; skull space is the rig's space."""
 
     spec: TakeSpec
@@ -141,7 +141,7 @@ def expression_weights(rig: FaceRig, spec: TakeSpec, frame_count: int) -> np.nda
     return weights
 
 
-def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | VolumetricParams | None = None) -> SimulatedTake:
+def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | VolumetricParams | None = None) -> SimulatedPerformance:
     """Simulate one take with its own physics (spec.tissue), else `tissue`, else the default
     TissueParams; the parameters' type picks the physics (facedyn.sim.tissue or .volumetric)."""
     trajectory = skull_motion(spec)
@@ -154,7 +154,7 @@ def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | Volumetri
         quasistatic, rig.topology.triangles(), trajectory.translate, trajectory.orient, spec.fps, params,
         noise_cm=spec.noise_cm, seed=spec.seed, rigid_weights=rig.rigid_weights, neutral=rig.neutral,
     )
-    return SimulatedTake(
+    return SimulatedPerformance(
         spec=spec,
         frames=np.arange(1, frame_count + 1, dtype=np.float64),
         fps=spec.fps,
@@ -177,7 +177,7 @@ def _init_worker(rig: FaceRig, tissue: TissueParams | VolumetricParams | None) -
     _worker_setup = (rig, tissue)
 
 
-def _simulate_in_worker(spec: TakeSpec) -> SimulatedTake:
+def _simulate_in_worker(spec: TakeSpec) -> SimulatedPerformance:
     rig, tissue = _worker_setup
     return simulate_take(rig, spec, tissue)
 

@@ -18,7 +18,7 @@ AXES = np.array([7.5, 10.0, 9.0])  # head semi-axes, cm (x: ear to ear, y: up, z
 
 
 @dataclass
-class SyntheticTake:
+class SyntheticCapture:
     world: np.ndarray  # (F, N, 3) float32 tracked points in world space
     skull: np.ndarray  # (F, N, 3) the same points in true skull space
     rest: np.ndarray  # (N, 3) undeformed surface, skull space
@@ -75,7 +75,7 @@ def synthetic_take(
     translation_cm: float = 2.0,
     deform_cm: float = 1.0,
     world_offset=(0.0, 160.0, 0.0),
-) -> SyntheticTake:
+) -> SyntheticCapture:
     if frames < 1 or vertices < 10:
         raise ValueError(f"need frames >= 1 and vertices >= 10, got {frames} and {vertices}")
     rng = np.random.default_rng(seed)
@@ -109,4 +109,4 @@ def synthetic_take(
     skull = np.einsum("fji,fnj->fni", quaternion.to_matrix(orient), world - translate[:, None, :])
     deforming = np.linalg.norm(offsets, axis=2).max(axis=0) > 0.1
     three = (eyes[0], eyes[1], nose)
-    return SyntheticTake(world.astype(np.float32), skull, rest, translate, orient, deforming, three, fps)
+    return SyntheticCapture(world.astype(np.float32), skull, rest, translate, orient, deforming, three, fps)

@@ -23,7 +23,7 @@ import numpy as np
 
 import facedyn
 from facedyn.progress import Progress
-from facedyn.sim.corpus import SimulatedTake, TakeSpec, simulate_takes
+from facedyn.sim.corpus import SimulatedPerformance, TakeSpec, simulate_takes
 from facedyn.sim.rig import FaceRig
 from facedyn.sim.tissue import TissueParams
 from facedyn.usd import schema
@@ -35,7 +35,7 @@ from facedyn.usd.timing import Timing
 CORPUS_INDEX = "corpus.json"
 
 
-def write_simulated_take(folder: Path, take: SimulatedTake, rig: FaceRig) -> dict:
+def write_simulated_take(folder: Path, take: SimulatedPerformance, rig: FaceRig) -> dict:
     """Write one simulated take (capture + truth layers + roots) into `folder`."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "truth").mkdir(exist_ok=True)

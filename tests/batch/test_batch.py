@@ -23,7 +23,7 @@ from facedyn.batch.state import STATE_FILE, file_checksum  # noqa: E402
 from facedyn.dynamics.face import FaceSetup  # noqa: E402
 from facedyn.dynamics.modelfile import load_model, save_model  # noqa: E402
 from facedyn.dynamics.synthesis import synthesis_config, train_synthesis  # noqa: E402
-from facedyn.dynamics.training import Take, TrainConfig, train_removal  # noqa: E402
+from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal  # noqa: E402
 from facedyn.sim.corpus import TakeSpec, simulate_take  # noqa: E402
 from facedyn.sim.default_face import default_face  # noqa: E402
 from facedyn.usd.corpus import write_simulated_take  # noqa: E402
@@ -49,7 +49,7 @@ def shots(tmp_path_factory, rig):
         shutil.copy(folder / "sim" / sim.spec.name / "capture.usdc", folder / f"{sim.spec.name}.usdc")
     (folder / "broken.usdc").write_bytes(b"not a usd file")
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, sample_count=16)
-    takes = [Take(s.spec.name, s.captured, s.fps, s.skull_translate, s.skull_orient, "skull", s.offsets) for s in sims]
+    takes = [TrainingSequence(s.spec.name, s.captured, s.fps, s.skull_translate, s.skull_orient, "skull", s.offsets) for s in sims]
     save_model(train_removal(takes, face, TrainConfig(epochs=1, trim=5, target="truth"), backend="numpy"), folder / "actor.removal")
     truth = {s.spec.name: s.quasistatic for s in sims}
     save_model(train_synthesis(takes, face, rig.uvs, truth, synthesis_config(epochs=1, trim=5), backend="numpy"), folder / "actor.synthesis")

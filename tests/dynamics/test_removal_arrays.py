@@ -10,7 +10,7 @@ from facedyn.dynamics.network import Network, removal_spec
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull import to_world
 from facedyn.dynamics.skull_motion import SkullMotionInput
-from facedyn.dynamics.training import Take, TrainConfig, train_removal
+from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
 
 ROWS, COLS, FPS = 12, 10, 120.0
 
@@ -145,7 +145,7 @@ def test_bad_input_is_a_clear_error(random_model, corpus):
     with pytest.raises(ValueError, match="unknown take keys"):
         train_removal([dict(takes[0], colour="red")], face)
     with pytest.raises(ValueError, match="too few"):
-        train_removal([Take("short", take["points"][:15], FPS, take["translate"][:15], take["orient"][:15], "world")], face)
+        train_removal([TrainingSequence("short", take["points"][:15], FPS, take["translate"][:15], take["orient"][:15], "world")], face)
 
 
 def test_true_targets_recover_slow_dynamics_the_moving_average_cannot_see(corpus):
@@ -160,7 +160,7 @@ def test_true_targets_recover_slow_dynamics_the_moving_average_cannot_see(corpus
     for i, hz in enumerate((1.5, 2.0, 2.5, 1.75)):
         t, q = platform_motion(360, FPS, hz, seed=10 + i)
         offsets = (g[None, :, None] * jiggle(t, q, FPS)[:, None, :]).astype(np.float32)
-        takes.append(Take(f"slow_{i}", (pts[None] + offsets).astype(np.float32), FPS, t, q, "skull", offsets))
+        takes.append(TrainingSequence(f"slow_{i}", (pts[None] + offsets).astype(np.float32), FPS, t, q, "skull", offsets))
     held = takes[-1]
     errors = {}
     for target in ("moving-average", "truth"):

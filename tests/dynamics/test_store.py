@@ -13,7 +13,7 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.features import compute_features
 from facedyn.dynamics.skull import to_world
 from facedyn.dynamics.store import BLOCK_FRAMES, Moments, StreamedExamples, TrainingStore, moments_of
-from facedyn.dynamics.training import PairSet, Take, TrainConfig, train_removal
+from facedyn.dynamics.training import PairSet, TrainingSequence, TrainConfig, train_removal
 
 FPS = 120.0
 
@@ -28,7 +28,7 @@ def corpus():
     for i, hz in enumerate((5.0, 6.5, 8.0, FPS / 21.0)):
         t, q = platform_motion(240, FPS, hz, seed=i)
         offsets = gain[None, :, None] * jiggle(t, q, FPS)[:, None, :]
-        takes.append(Take(f"platform_{i}", to_world(pts[None] + offsets, t, q).astype(np.float32), FPS, t, q, "world"))
+        takes.append(TrainingSequence(f"platform_{i}", to_world(pts[None] + offsets, t, q).astype(np.float32), FPS, t, q, "world"))
     return face, takes
 
 
@@ -129,7 +129,7 @@ def test_a_take_generator_is_read_one_take_at_a_time(corpus):
         for take in takes:
             gc.collect()
             assert all(ref() is None for ref in alive), "an earlier take is still held"
-            copy = Take(take.name, take.points.copy(), take.fps, take.translate, take.orient, take.space)
+            copy = TrainingSequence(take.name, take.points.copy(), take.fps, take.translate, take.orient, take.space)
             alive.append(weakref.ref(copy.points))
             yield copy
             del copy

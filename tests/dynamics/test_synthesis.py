@@ -14,7 +14,7 @@ from facedyn.dynamics.skull import to_world
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods
 from facedyn.dynamics.synthesis import model_stretch, synthesis_config, synthesize_dynamics, train_synthesis
-from facedyn.dynamics.training import Take
+from facedyn.dynamics.training import TrainingSequence
 from facedyn.geometry import quaternion
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
@@ -57,7 +57,7 @@ def corpus(rig):
 
 def as_take(sim, space="skull"):
     points = sim.captured if space == "skull" else to_world(sim.captured, sim.skull_translate, sim.skull_orient).astype(np.float32)
-    return Take(sim.spec.name, points, sim.fps, sim.skull_translate, sim.skull_orient, space)
+    return TrainingSequence(sim.spec.name, points, sim.fps, sim.skull_translate, sim.skull_orient, space)
 
 
 @pytest.fixture(scope="module")
@@ -169,7 +169,7 @@ def test_bad_training_input_is_a_clear_error(corpus, face, rig, trained):
     with pytest.raises(ValueError, match="other skin samples"):
         train_synthesis(takes, face, other, truth, config)
     with pytest.raises(ValueError, match="different frame rates"):
-        train_synthesis([takes[0], Take(takes[1].name, takes[1].points, 96.0)], face, rig.uvs, truth, config)
+        train_synthesis([takes[0], TrainingSequence(takes[1].name, takes[1].points, 96.0)], face, rig.uvs, truth, config)
 
 
 # --- retargeting -------------------------------------------------------------------------

@@ -6,7 +6,7 @@ from facedyn.errors import UsageError
 from facedyn.processors import registry
 from facedyn.processors.base import Parameter, Reads, Writes
 
-BUILT_IN = ("import", "stabilize", "remove", "synthesize", "retarget", "preview", "synth", "train-removal", "train-synthesis", "demo", "actor")
+BUILT_IN = ("import", "stabilize", "remove", "synthesize", "retarget", "preview", "synth", "train-removal", "train-synthesis", "demo", "actor", "evaluate")
 
 
 def run(argv, capsys):
