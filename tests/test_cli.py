@@ -290,3 +290,26 @@ def test_import_refuses_samples_between_frames_unless_resampled(tmp_path, capsys
     for bad in ("nan", "inf", "-1"):
         code, _, err = run(["import", source, "-o", tmp_path / "bad.usdc", "--fps", bad], capsys)
         assert code == 2 and "--fps" in err
+
+
+def test_paths_and_degenerate_meshes_are_one_line_errors(tmp_path, grid_cache, capsys, monkeypatch):
+    """Issue 16: symlink loops, names that are no USD layer, .usdz outputs, collapsed or astronomically large meshes."""
+    cache, frames = grid_cache
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "loop1").symlink_to(tmp_path / "loop2")
+    (tmp_path / "loop2").symlink_to(tmp_path / "loop1")
+    (tmp_path / "noext").write_text("")
+    cases = [
+        (["import", "loop1", "-o", "c.usdc"], 1, "loop of symbolic links"),
+        (["stabilize", "noext", "-o", "s.usdc"], 2, "not a take"),
+        (["import", cache, "-o", "c"], 2, "a layer is written as .usdc"),
+        (["import", cache, "-o", "c.usdz"], 2, "not .usdz"),
+    ]
+    points, counts, indices = grid_mesh(3)
+    for name, values, message in (("zero", np.zeros((2, len(points), 3)), "every point coincides"),
+                                  ("huge", np.stack([points, points]) * 1e30, "coordinates beyond")):
+        cases.append((["import", write_mesh_cache(tmp_path / f"{name}.usda", values, counts, indices), "-o", f"{name}.usdc"], 1, message))
+    for argv, expected, message in cases:
+        code, _, err = run(argv, capsys)
+        _assert_clean_failure(code, err, expected, message)
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name != Path(cache).name) == ["huge.usda", "loop1", "loop2", "noext", "zero.usda"]

@@ -159,7 +159,7 @@ def read_usd_mesh(path: Path, mesh: str = "", frames=None, first_frame_only: boo
     from facedyn.usd import schema
     from facedyn.usd.errors import TakeError
     from facedyn.usd.stage import layer_name
-    from facedyn.usd.take import ensure_finite, read_topology, read_uvs, read_vec3_samples
+    from facedyn.usd.take import ensure_plausible_points, read_topology, read_uvs, read_vec3_samples
     from facedyn.usd.takechecks import CENTIMETRES
     from facedyn.usd.timing import Timing
     from pxr import Usd, UsdGeom
@@ -178,7 +178,7 @@ def read_usd_mesh(path: Path, mesh: str = "", frames=None, first_frame_only: boo
         time_codes = time_codes[:1] if first_frame_only else time_codes
         codes = [Usd.TimeCode(float(t)) for t in time_codes]
         points = read_vec3_samples(geom.GetPointsAttr(), time_codes, where + ".points").astype(np.float64)
-    ensure_finite(points, time_codes, where + ".points")
+    ensure_plausible_points(points, time_codes, where + ".points")
     if points.shape[1] != topology.point_count:
         raise TakeError(f"{where}: {points.shape[1]} points but the topology indexes {topology.point_count}")
     xforms = np.array([np.asarray(UsdGeom.XformCache(code).GetLocalToWorldTransform(mesh_prim)) for code in codes])

@@ -81,6 +81,7 @@ def _make_folders(folder: Path) -> list[Path]:
 
 def _check_paths(processor: Processor, request: Request) -> None:
     """Refuse outputs that would overwrite an input, or land where nothing can be written."""
+    _check_names(processor, request)
     output = request.output.resolve()
     for path in request.inputs:
         if Path(path).resolve() == output:
@@ -97,6 +98,30 @@ def _check_paths(processor: Processor, request: Request) -> None:
         raise UsageError(f"{request.output}: is a file; -o names the folder to write")
     if request.attach is not None and writes != "layer":
         raise UsageError(f"{processor.name} writes a {writes}, which cannot be attached to a take")
+
+
+LAYER_SUFFIXES = (".usd", ".usda", ".usdc")  # what a take and its layers can be written as (not .usdz packages)
+
+
+def _check_names(processor: Processor, request: Request) -> None:
+    """Paths a user can get wrong before any file is read: symlink loops, and take or layer names that are no USD layer."""
+    from facedyn.errors import FacedynError
+
+    named = [*request.inputs, request.output] + ([request.attach] if request.attach is not None else [])
+    for path in named:
+        try:
+            path.resolve()
+        except (RuntimeError, OSError):
+            raise FacedynError(f"{path}: a loop of symbolic links, not a file") from None
+    if processor.reads.what == "take":
+        for path in request.inputs:
+            if path.suffix.lower() not in (*LAYER_SUFFIXES, ".usdz"):
+                raise UsageError(f"{path}: not a take (expected a .usda/.usdc/.usd take root; `usdfacedyn import` makes one)")
+    if processor.writes.what == "layer":
+        for path, flag in ((request.output, "-o"), (request.attach, "--attach")):
+            if path is not None and path.suffix.lower() not in LAYER_SUFFIXES:
+                raise UsageError(f"{flag} {path}: a layer is written as .usdc (data) or .usda (roots), not "
+                                 f"{path.suffix or 'a name without extension'}")
 
 
 def _import_root(processor: Processor, request: Request) -> Path | None:

@@ -189,7 +189,7 @@ def read_performance(
     points = read_vec3_samples(mesh.GetPointsAttr(), time_codes, where + ".points")
     if points.shape[1] != topology.point_count:
         raise TakeError(f"{where}: {points.shape[1]} points but the topology indexes {topology.point_count}")
-    ensure_finite(points, time_codes, where + ".points")
+    ensure_plausible_points(points, time_codes, where + ".points")
     timing = Timing.from_stage(stage)
     face = schema.FaceAttributes.read(mesh_prim)
     offsets = None
@@ -318,6 +318,25 @@ def ensure_finite(values: np.ndarray, time_codes: np.ndarray, where: str) -> Non
     if not finite.all():
         bad = int(np.argmin(finite))
         raise TakeError(f"{where}: NaN or infinite values at time {time_codes[bad]:g}")
+
+
+MAX_COORDINATE_CM = 1e6  # 10 km from the origin: no capture volume is that large
+MIN_EXTENT_CM = 1e-4  # a frame whose points all coincide (to 1 µm) has no shape to track
+
+
+def ensure_plausible_points(points: np.ndarray, time_codes: np.ndarray, where: str) -> None:
+    """Finite, and frames that are a shape in centimetres: not collapsed to a point, not astronomically far."""
+    ensure_finite(points, time_codes, where)
+    far = np.abs(points).max(axis=(1, 2)) > MAX_COORDINATE_CM
+    if far.any():
+        bad = int(np.argmax(far))
+        raise TakeError(f"{where}: coordinates beyond {MAX_COORDINATE_CM:g} cm at time {time_codes[bad]:g}; "
+                        "check the source's units (metersPerUnit, or import --units for OBJ)")
+    extent = (points.max(axis=1) - points.min(axis=1)).max(axis=1)
+    flat = extent < MIN_EXTENT_CM
+    if flat.any():
+        bad = int(np.argmax(flat))
+        raise TakeError(f"{where}: every point coincides at time {time_codes[bad]:g} (no shape to track)")
 
 
 
