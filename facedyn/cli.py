@@ -58,20 +58,27 @@ def _summary(name: str) -> str:
         return f"(failed to load: {exc})"
 
 
+def _tool(commands, name: str, help_text: str, handler, operand: tuple[str, str] | None = None, json_help: str | None = None):
+    """A look-at-results command: an optional path operand, --json when it can print JSON, --debug."""
+    p = commands.add_parser(name, help=help_text)
+    if operand is not None:
+        p.add_argument(operand[0], type=Path, metavar=operand[1])
+    if json_help is None:
+        p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
+    else:
+        common_flags(p, json_help)
+    p.set_defaults(handler=handler)
+    return p
+
+
 def _add_tools(commands) -> None:
     """The commands that look at what processors made (they write nothing but layer edits)."""
-    p = commands.add_parser("list", help="list the registered processors")
-    common_flags(p, "print JSON")
-    p.set_defaults(handler=_cmd_list)
-
-    p = commands.add_parser("env", help="print the shell lines that make usdview and DCCs load facedyn's plugins")
-    p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
-    p.set_defaults(handler=_cmd_env)
-
-    p = commands.add_parser("inspect", help="show a take's layer stack, roles, staleness and provenance, or a model file's metadata")
-    p.add_argument("path", type=Path, metavar="TAKE|LAYER|MODEL")
-    common_flags(p, "print JSON")
-    p.set_defaults(handler=_cmd_inspect)
+    _tool(commands, "list", "list the registered processors", _cmd_list, json_help="print JSON")
+    _tool(commands, "env", "print the shell lines that make usdview and DCCs load facedyn's plugins", _cmd_env)
+    _tool(commands, "inspect", "show a take's layer stack, roles, staleness and provenance, or a model file's metadata",
+          _cmd_inspect, operand=("path", "TAKE|LAYER|MODEL"), json_help="print JSON")
+    _tool(commands, "validate", "run USD's validators and facedyn's own on a take", _cmd_validate,
+          operand=("take", "TAKE"), json_help="print the findings as JSON")
 
     p = commands.add_parser("batch", help="run a pipeline of steps over many captures on a Dask cluster (local by default)")
     from facedyn.batch.command import add_batch_arguments, run_batch
@@ -79,11 +86,6 @@ def _add_tools(commands) -> None:
     add_batch_arguments(p)
     p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(handler=run_batch)
-
-    p = commands.add_parser("validate", help="run USD's validators and facedyn's own on a take")
-    p.add_argument("take", type=Path, metavar="TAKE")
-    common_flags(p, "print the findings as JSON")
-    p.set_defaults(handler=_cmd_validate)
 
     p = commands.add_parser("layers", help="list a take's layers (roles, staleness), or mute, unmute, detach or reorder one on disk",
                             description="Edits the take root atomically under its lock; the layer files themselves are never touched.")
