@@ -304,6 +304,8 @@ def test_paths_and_degenerate_meshes_are_one_line_errors(tmp_path, grid_cache, c
         (["stabilize", "noext", "-o", "s.usdc"], 2, "not a take"),
         (["import", cache, "-o", "c"], 2, "a layer is written as .usdc"),
         (["import", cache, "-o", "c.usdz"], 2, "not .usdz"),
+        (["import", cache, "-o", os.fsdecode(b"caf\xe9/capture.usdc")], 1, "not valid UTF-8"),
+        (["inspect", os.fsdecode(b"caf\xe9.usda")], 1, "not valid UTF-8"),
     ]
     points, counts, indices = grid_mesh(3)
     for name, values, message in (("zero", np.zeros((2, len(points), 3)), "every point coincides"),

@@ -102,7 +102,8 @@ def signals_raise():
 
 def fail(message: str, code: int, as_json: bool) -> int:
     """One line on stderr; on --json runs the same error as JSON on stdout."""
-    message = " ".join(message.split())
+    # One line, and printable on any stream: undecodable path bytes are shown escaped (\udce9 -> \\udce9).
+    message = " ".join(message.split()).encode("utf-8", "backslashreplace").decode("utf-8")
     print(message, file=sys.stderr)
     if as_json:
         print(json.dumps({"error": message, "exit_code": code}))

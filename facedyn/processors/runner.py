@@ -113,6 +113,8 @@ def _check_names(processor: Processor, request: Request) -> None:
             path.resolve()
         except (RuntimeError, OSError):
             raise FacedynError(f"{path}: a loop of symbolic links, not a file") from None
+        if not utf8_path(path):
+            raise FacedynError(f"{path}: the path is not valid UTF-8, which USD needs for file names; rename it")
     if processor.reads.what == "take":
         for path in request.inputs:
             if path.suffix.lower() not in (*LAYER_SUFFIXES, ".usdz"):
@@ -122,6 +124,15 @@ def _check_names(processor: Processor, request: Request) -> None:
             if path is not None and path.suffix.lower() not in LAYER_SUFFIXES:
                 raise UsageError(f"{flag} {path}: a layer is written as .usdc (data) or .usda (roots), not "
                                  f"{path.suffix or 'a name without extension'}")
+
+
+def utf8_path(path: Path) -> bool:
+    """Whether a path (as the OS gave it) can be handed to USD, which takes UTF-8 names."""
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _import_root(processor: Processor, request: Request) -> Path | None:

@@ -12,6 +12,10 @@ from facedyn.usd.errors import TakeError
 def open_stage(path: str | os.PathLike) -> Usd.Stage:
     """Open a USD file, or raise a one-line TakeError naming it (missing, unreadable, not USD)."""
     path = Path(path)
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:
+        raise TakeError(f"{path}: the path is not valid UTF-8, which USD needs for file names; rename it") from None
     if not path.exists():
         raise TakeError(f"{path}: no such file")
     if path.is_dir():
