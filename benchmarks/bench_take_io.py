@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-import facedyn
 from facedyn.geometry import quaternion
 from facedyn.performance import Topology
 from facedyn.usd import schema

@@ -61,13 +61,6 @@ def write_actor(path: str | os.PathLike, actor: Actor) -> Path:
     return path
 
 
-def is_actor(path: str | os.PathLike) -> bool:
-    """Whether `path` is an actor asset (without composing it)."""
-    layer = Sdf.Layer.FindOrOpen(str(path))
-    data = dict(layer.customLayerData).get("facedyn", {}) if layer else {}
-    return isinstance(data, dict) and data.get("role") == ACTOR_ROLE
-
-
 def read_actor_for(path: str | os.PathLike, topology, take: str | os.PathLike) -> Actor:
     """The actor in an actor asset, checked to apply to `take` (tracked on the same mesh)."""
     actor = read_actor(path)

@@ -33,7 +33,6 @@ class TakeSource:
     mesh_path: str
     skull_path: str | None
     timing: Timing
-    layer_identifiers: tuple[str, ...]
     inputs: tuple[LayerInput, ...] = ()  # the data layers read, strongest first, with their run ids
 
 
@@ -41,19 +40,12 @@ def read_take(
     path: str | os.PathLike,
     mesh: str | None = None,
     frames: tuple[float, float] | None = None,
-    mute: frozenset[str] = frozenset(),
 ) -> tuple[Performance, TakeSource]:
-    """Read the face of a take (the mesh with FacedynFaceAPI, or `mesh`) over `frames` (inclusive).
+    """Read the face of a take (the mesh with FacedynFaceAPI, or `mesh`) over `frames` (inclusive), all layers composed.
 
-    `mute` names processors whose layers are muted first (older callers; a processor reads
-    with `read_take_below` instead).
+    A processor reads what lies below its own role instead (`read_take_below`).
     """
-    stage = open_stage(path)
-    if mute:
-        stage.MuteAndUnmuteLayers(
-            [layer.identifier for layer in stage.GetLayerStack(False) if (layer_metadata(layer) or {}).get("processor") in mute], []
-        )
-    return read_stage(stage, Path(path), mesh, frames)
+    return read_stage(open_stage(path), Path(path), mesh, frames)
 
 
 def read_take_below(
@@ -120,7 +112,6 @@ def read_stage(
         mesh_path=str(mesh_prim.GetPath()),
         skull_path=str(skull_prim.GetPath()) if skull_prim else None,
         timing=timing,
-        layer_identifiers=tuple(layer.identifier for layer in stage.GetLayerStack(includeSessionLayers=False)),
         inputs=read_inputs(stage),
     )
     return performance, source

@@ -18,7 +18,7 @@ from facedyn.usd.rootedit import attach, attach_written_layer, detach, move, mut
 from facedyn.usd.stackstatus import covers_take, stack_status
 from facedyn.usd.take import read_take, read_take_below
 
-from stack_fixtures import FRAMES, OFFSET, TIMING, base_points, build_take, make_capture, sublayers, write_role_layer
+from stack_fixtures import FRAMES, OFFSET, base_points, build_take, make_capture, sublayers, write_role_layer
 
 FULL = ["./take.preview.usdc", "./synthesized.hop.usdc", "./quasistatic.usdc", "./stabilized.usdc", "./capture.usdc"]
 

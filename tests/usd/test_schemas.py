@@ -4,7 +4,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 from pxr import Sdf, Usd, UsdGeom
 
 import facedyn

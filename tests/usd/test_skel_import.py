@@ -1,14 +1,12 @@
 """`import` bakes a UsdSkel animation (blend shapes and joints) into a take, by UsdSkel's own evaluation."""
 import numpy as np
-import pytest
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+from pxr import Gf, Usd, UsdGeom, UsdSkel, Vt
 
 from facedyn.cli import main
 from facedyn.usd.take import read_take
 
 REST = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
 FRAMES = [1, 2, 3, 4]
-
 
 def _small_rig(path):
     """A quad skinned to one joint that slides along x, with a blend shape lifting vertex 2 by 3 units at weight 1."""

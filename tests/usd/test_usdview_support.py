@@ -5,14 +5,13 @@ import subprocess
 import sys
 
 import numpy as np
-import pytest
+
 from pxr import Plug, Usd
 
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
 from facedyn.usd import layerstack, plugin
 from facedyn.usd.corpus import write_simulated_take
-
 
 def test_usdview_plugin_is_registered_and_import_guarded():
     assert Plug.Registry().GetPluginWithName("facedynUsdview") is not None
