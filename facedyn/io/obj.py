@@ -52,9 +52,7 @@ class ObjSequence:
     @property
     def uvs(self) -> UVs | None:
         """The uvs as a Performance holds them (faceVarying, indexed), None without uvs."""
-        if self.uv_values is None:
-            return None
-        return UVs(self.uv_values, self.uv_indices, "faceVarying")
+        return _performance_uvs(self.uv_values, self.uv_indices)
 
 
 def read_obj(path: str | PathLike) -> ObjMesh:
@@ -154,13 +152,49 @@ def write_obj(path: str | PathLike, mesh: ObjMesh) -> None:
             handle.write(f"f {corners}\n")
 
 
+class ObjFrames:
+    """An OBJ sequence read a range of files at a time, so a long one is never whole in memory.
+
+    The first file gives the topology and uvs every frame shares; `read` parses the files of
+    any range of frames, and the first file whose topology (point count, polygons, uv
+    indices) differs from the first frame's is an InputError naming it.
+    """
+
+    def __init__(self, paths: Sequence[str | PathLike]):
+        self.paths = [str(path) for path in paths]
+        if not self.paths:
+            raise ValueError("an OBJ sequence needs at least one path")
+        self.first = read_obj(self.paths[0])
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    @property
+    def uvs(self) -> UVs | None:
+        """The first frame's uvs as a Performance holds them (faceVarying, indexed), None without uvs."""
+        return _performance_uvs(self.first.uv_values, self.first.uv_indices)
+
+    def read(self, start: int, stop: int, progress: Progress | None = None) -> np.ndarray:
+        """(stop - start, N, 3) float32: the points of files start..stop-1, each checked against the first."""
+        points = np.empty((stop - start,) + self.first.points.shape, dtype=np.float32)
+        for row, path in enumerate(self.paths[start:stop]):
+            mesh = self.first if start + row == 0 else read_obj(path)
+            difference = _topology_difference(self.first, mesh)
+            if difference:
+                raise InputError(path, f"topology differs from the first frame {self.paths[0]}: {difference}")
+            points[row] = mesh.points
+            if progress is not None:
+                progress.advance()
+        return points
+
+
 def read_obj_sequence(
     paths_or_glob: str | PathLike | Sequence[str | PathLike], progress: Progress | None = None
 ) -> ObjSequence:
-    """Read frames that share one topology; a glob is sorted naturally (frame2 before frame10).
+    """Read frames that share one topology (all at once; ObjFrames reads a range at a time).
 
-    The first file whose topology (point count, polygons, uv indices) differs from the
-    first frame's is an InputError naming it.
+    A glob is sorted naturally (frame2 before frame10). The first file whose topology
+    differs from the first frame's is an InputError naming it.
     """
     if isinstance(paths_or_glob, (str, PathLike)):
         pattern = str(paths_or_glob)
@@ -171,21 +205,18 @@ def read_obj_sequence(
         paths = [str(path) for path in paths_or_glob]
         if not paths:
             raise ValueError("read_obj_sequence needs at least one path")
+    frames = ObjFrames(paths)
     if progress is not None:
         progress.start("read OBJ", len(paths))
-    first = read_obj(paths[0])
-    points = np.empty((len(paths),) + first.points.shape, dtype=np.float32)
-    for frame, path in enumerate(paths):
-        mesh = first if frame == 0 else read_obj(path)
-        difference = _topology_difference(first, mesh)
-        if difference:
-            raise InputError(path, f"topology differs from the first frame {paths[0]}: {difference}")
-        points[frame] = mesh.points
-        if progress is not None:
-            progress.advance()
+    points = frames.read(0, len(frames), progress)
     if progress is not None:
         progress.finish()
+    first = frames.first
     return ObjSequence(points, first.face_vertex_counts, first.face_vertex_indices, first.uv_values, first.uv_indices, paths)
+
+
+def _performance_uvs(values: np.ndarray | None, indices: np.ndarray | None) -> UVs | None:
+    return None if values is None else UVs(values, indices, "faceVarying")
 
 
 def _topology_difference(a: ObjMesh, b: ObjMesh) -> str:

@@ -1,13 +1,14 @@
-"""Resampling onto regular frame grids: expression curves here, and the time grid and
-interval lookup that skull trajectory resampling (facedyn.motion.resample) shares.
+"""Resampling onto regular frame grids: expression curves (linear), mesh points (a cubic
+spline, chunk by chunk: CubicResampler), and the time grid and interval lookup that skull
+trajectory resampling (facedyn.motion.resample) shares.
 
 Captured curves come at the phone's rate (30 or 60 fps, with dropped rows); the simulator
 and the takes run at the capture rate (96-128 fps), so curves are resampled onto its grid.
 """
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 
@@ -57,3 +58,65 @@ def resample_curves(curves: ExpressionCurves, fps: float, frame_count: int | Non
     lo, hi, w = bracket(curves.times, new_times)
     weights = curves.weights[lo] * (1 - w)[:, None] + curves.weights[hi] * w[:, None]
     return replace(curves, times=new_times, weights=weights.astype(curves.weights.dtype), fps=float(fps))
+
+
+SPLINE_CONTEXT = 64
+"""Source samples read on each side of a chunk resampled by CubicResampler. A cubic spline's
+value depends on far samples through its second-derivative system, which is diagonally
+dominant by 2 (any sample spacing), so their influence at least halves per sample: beyond
+64 samples (2**-64) it is below float64 rounding, and the chunk equals the whole spline."""
+
+
+@dataclass(frozen=True)
+class SplineWindow:
+    """Output frames [start, stop) of the new grid, computed from the source samples [lo, hi)."""
+
+    start: int
+    stop: int
+    lo: int
+    hi: int
+
+
+class CubicResampler:
+    """Values sampled at increasing `seconds`, onto the grid seconds[0] + k / rate, a chunk at a time.
+
+    The interpolant is one cubic spline through every sample (not-a-knot ends; quadratic or
+    linear when there are only 3 or 2 samples), so motion that is a cubic polynomial in time
+    comes back exactly and samples already on the grid come back unchanged (up to float32
+    rounding). A long take is resampled chunk by chunk (`windows`, then `resample` on each
+    window's samples), each chunk from a spline through its samples and SPLINE_CONTEXT more
+    on each side, which equals the whole take's spline to float64 rounding; a take of one
+    window is exactly the whole take's spline. Grid times past the last sample hold it.
+    """
+
+    def __init__(self, seconds: np.ndarray, rate: float):
+        self.seconds = np.asarray(seconds, dtype=np.float64)
+        if self.seconds.ndim != 1 or self.seconds.size == 0 or np.any(np.diff(self.seconds) <= 0):
+            raise ValueError("resampling needs increasing sample times")
+        self.rate = float(rate)
+        self.count = int(np.floor((self.seconds[-1] - self.seconds[0]) * self.rate + 1e-6)) + 1
+        self.degree = min(3, self.seconds.size - 1)
+
+    def times(self, start: int, stop: int) -> np.ndarray:
+        """The grid times of output frames start..stop-1 (clamped to the last sample)."""
+        grid = self.seconds[0] + np.arange(start, stop, dtype=np.float64) / self.rate
+        return np.minimum(grid, self.seconds[-1])
+
+    def windows(self, chunk: int) -> Iterator[SplineWindow]:
+        """Consecutive chunks of `chunk` output frames, with the source samples each one needs."""
+        for start in range(0, self.count, chunk):
+            stop = min(start + chunk, self.count)
+            times = self.times(start, stop)
+            first = int(np.searchsorted(self.seconds, times[0], side="right")) - 1
+            last = int(np.searchsorted(self.seconds, times[-1], side="left"))
+            lo, hi = max(0, first - SPLINE_CONTEXT), min(self.seconds.size, last + 1 + SPLINE_CONTEXT)
+            yield SplineWindow(start, stop, lo, hi)
+
+    def resample(self, window: SplineWindow, values: np.ndarray) -> np.ndarray:
+        """float32 values (stop - start, ...) on the window's grid frames, from the (hi - lo, ...) values at its samples."""
+        from scipy.interpolate import make_interp_spline
+
+        if self.seconds.size == 1:
+            return np.asarray(values, dtype=np.float32)
+        spline = make_interp_spline(self.seconds[window.lo:window.hi], np.asarray(values, dtype=np.float64), k=self.degree, axis=0)
+        return spline(self.times(window.start, window.stop)).astype(np.float32)

@@ -87,7 +87,7 @@ def _from_rig(path: Path, params: dict, name: str):
 
 def _from_neutral(path: Path, params: dict, name: str):
     """The first frame of a take, or the first sample of a mesh (static or animated), made canonical like import does."""
-    from facedyn.processors.import_take import read_usd_mesh
+    from facedyn.usd.source import read_usd_mesh
 
     mesh = read_usd_mesh(path, params["mesh"], first_frame_only=True)
     return _actor(name, "neutral", params["samples"], neutral=mesh.points[0], topology=mesh.topology, uvs=mesh.uvs)
@@ -95,7 +95,7 @@ def _from_neutral(path: Path, params: dict, name: str):
 
 def _from_takes(paths: list[Path], params: dict, name: str):
     """The rigid mode found on the first take, each later take registered to it and merged in."""
-    from facedyn.processors.import_take import read_usd_mesh
+    from facedyn.usd.source import read_usd_mesh
     from facedyn.stabilize.rigidity import estimate_rigidity
 
     first, found = None, None

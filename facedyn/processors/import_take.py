@@ -9,6 +9,14 @@ capture that is not (samples between frames, gaps, a rate other than the model's
 resampled with `--fps RATE`: points by cubic interpolation over time, frame numbers on the
 new grid starting at the source's first frame. An OBJ sequence's --fps is its own rate, and
 gaps in its frame numbers are filled the same way (the summary counts them).
+
+The source streams into the layer CHUNK_FRAMES frames at a time (USD: one Get per frame,
+facedyn.usd.source; OBJ: file by file, facedyn.io.obj.ObjFrames), each chunk resampled
+from the samples it needs (facedyn.io.resample.CubicResampler), so memory does not grow
+with the take; a take past 5,000 frames is written as value clips. Checks that need the
+whole take (the time codes' grid, the frame range) run on the time codes before any point
+is read; a fault found in a later chunk (a NaN, a changed topology) stops the write before
+the layer or its take root exists.
 """
 from __future__ import annotations
 
@@ -16,14 +24,17 @@ import glob
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from facedyn.errors import UsageError
+from facedyn.io.resample import CubicResampler, SplineWindow
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.progress import Progress
 
-MAX_RESAMPLED_BYTES = 8 << 30  # a resampled capture larger than this is refused before it is allocated
+CHUNK_FRAMES = 1024  # frames read, resampled and written (one value clip of a long take) at a time
+MAX_RESAMPLED_FRAMES = 10_000_000  # a day at 120 fps: a longer resampled grid is a wrong --fps or wrong time codes
 
 
 class ImportProcessor(Processor):
@@ -48,25 +59,29 @@ class ImportProcessor(Processor):
         return Path(root) if root else request.output.parent / "take.usda"
 
     def prepare(self, request: Request) -> Plan:
+        from facedyn.io.obj import ObjFrames
+        from facedyn.usd.source import open_mesh_source
+
         if request.attach is not None:
             raise UsageError("import creates or extends its own take root; name it with --root, not --attach")
         source = _source(request)
         root = self.take_root(request)
         if source.kind == "usd":
             resample = request.params["fps"] > 0
-            stage, mesh_prim, time_codes = _usd_source(source.paths[0], request.params["mesh"], request.frames, whole_frames=not resample)
-            description = {"source": str(source.paths[0]), "mesh": str(mesh_prim.GetPath()), "frames": len(time_codes),
-                           "fps": stage.GetTimeCodesPerSecond(), "root": str(root)}
+            mesh = open_mesh_source(source.paths[0], request.params["mesh"], request.frames, whole_frames=not resample)
+            description = {"source": str(source.paths[0]), "mesh": str(mesh.prim.GetPath()), "frames": len(mesh.time_codes),
+                           "fps": mesh.timing.time_codes_per_second, "root": str(root)}
             if resample:
                 description["resample_fps"] = request.params["fps"]
-            return Plan(description, (source, request, root, (stage, mesh_prim, time_codes)))
-        _require_fps(request)
-        description = {"source": f"{len(source.paths)} OBJ files", "fps": request.params["fps"], "root": str(root)}
-        return Plan(description, (source, request, root, None))
+            return Plan(description, (source, request, root, _usd_capture(source.paths[0], mesh, request.params["fps"])))
+        fps = _require_fps(request)
+        paths, frames = _obj_frames(source.paths, request.frames)
+        description = {"source": f"{len(source.paths)} OBJ files", "fps": fps, "root": str(root)}
+        return Plan(description, (source, request, root, _obj_capture(paths, frames, ObjFrames(paths), request.params)))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
-        source, request, root, usd = plan.state
-        output = _import_usd(source.paths[0], usd, request, progress) if source.kind == "usd" else _import_obj(source.paths, request, progress)
+        source, request, root, capture = plan.state
+        output = capture.output(progress)
         output.root = root
         if request.params["actor"] is not None:
             from facedyn.usd.actor import read_actor_for
@@ -107,169 +122,105 @@ def _require_fps(request: Request) -> float:
 
 
 @dataclass
-class CanonicalMesh:
-    """An animated (or static) USD mesh in world space, centimetres, Y up: what a take holds."""
+class _Capture:
+    """A capture ready to stream into its layer: the output frames, how to read the source's samples, what the layer says once."""
 
-    points: np.ndarray  # (F, N, 3) float32
-    frames: np.ndarray  # (F,) time codes
-    fps: float
-    topology: object  # facedyn.performance.Topology
-    uvs: object  # facedyn.performance.UVs | None
-    prim_path: str
-    face: object  # facedyn.usd.schema.FaceAttributes authored on the source mesh
-    source_fps: tuple[float, float]  # the source stage's (timeCodesPerSecond, framesPerSecond)
+    frames: np.ndarray  # (F,) the layer's frame numbers
+    read: Callable[[int, int], np.ndarray]  # source samples lo..hi-1 -> (hi - lo, N, 3) float32 canonical points
+    resampler: CubicResampler | None  # None: the samples are the frames
+    layer: object  # facedyn.usd.layers.LayerContent: the static values (topology, uvs, face, skull)
+    timing: object  # facedyn.usd.timing.Timing of the take
+    inputs: list[str]
+    summary: dict
 
+    def output(self, progress: Progress) -> LayerOutput:
+        return LayerOutput(layer=self.layer, timing=self.timing, inputs=self.inputs, define=True, summary=self.summary,
+                           chunks=self.chunks(progress))
 
-def _usd_source(path: Path, mesh: str, frames=None, static_ok: bool = False, whole_frames: bool = True):
-    """(stage, the mesh prim, its time codes): the named mesh, else the only animated one.
+    def chunks(self, progress: Progress):
+        """The layer's points CHUNK_FRAMES frames at a time, each from the source samples it needs (read as it is written)."""
+        from facedyn.usd.layers import LayerContent
 
-    A UsdSkel animation is baked first (in memory), so a skinned or blend-shape rig's mesh
-    counts as animated. `whole_frames`: the time codes must be consecutive whole frames
-    (see select_time_codes).
-    """
-    from facedyn.usd.errors import TakeError
-    from facedyn.usd.skel import bake_skel_animations
-    from facedyn.usd.stage import get_prim, layer_name, open_stage
-    from facedyn.usd.take import find_animated_meshes, select_time_codes
-    from pxr import UsdGeom
-
-    stage = open_stage(path)
-    bake_skel_animations(stage)
-    if mesh:
-        mesh_prim = get_prim(stage, mesh)
-        if not mesh_prim.IsA(UsdGeom.Mesh):
-            raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()} is not a Mesh")
-    else:
-        animated = find_animated_meshes(stage)
-        if static_ok and not animated:
-            animated = [prim for prim in stage.Traverse() if prim.IsA(UsdGeom.Mesh)]
-        if not animated:
-            raise TakeError(f"{layer_name(stage)}: no Mesh with time-sampled points (nothing to import)")
-        if len(animated) > 1:
-            names = ", ".join(str(p.GetPath()) for p in animated)
-            raise TakeError(f"{layer_name(stage)}: several {'animated ' if not static_ok else ''}meshes ({names}); choose one with --mesh")
-        mesh_prim = animated[0]
-    if static_ok and UsdGeom.Mesh(mesh_prim).GetPointsAttr().GetNumTimeSamples() == 0:
-        return stage, mesh_prim, None
-    return stage, mesh_prim, select_time_codes(stage, mesh_prim, frames, whole_frames)
+        count = len(self.frames)
+        if self.resampler is None:
+            windows = (SplineWindow(a, min(a + CHUNK_FRAMES, count), a, min(a + CHUNK_FRAMES, count)) for a in range(0, count, CHUNK_FRAMES))
+        else:
+            windows = self.resampler.windows(CHUNK_FRAMES)
+        progress.start("import", count)
+        for window in windows:
+            points = self.read(window.lo, window.hi)
+            if self.resampler is not None:
+                points = self.resampler.resample(window, points)
+            yield LayerContent(frames=self.frames[window.start:window.stop], points=points)
+            progress.advance(window.stop - window.start)
+        progress.finish()
 
 
-def read_usd_mesh(path: Path, mesh: str = "", frames=None, first_frame_only: bool = False, usd=None) -> CanonicalMesh:
-    """A USD mesh's points in world space, centimetres, Y up (every frame, or the first only)."""
-    from facedyn.usd import schema
-    from facedyn.usd.errors import TakeError
-    from facedyn.usd.stage import layer_name
-    from facedyn.usd.take import ensure_plausible_points, read_topology, read_uvs, read_vec3_samples
-    from facedyn.usd.takechecks import CENTIMETRES
-    from facedyn.usd.timing import Timing
-    from pxr import Usd, UsdGeom
-
-    stage, mesh_prim, time_codes = usd or _usd_source(path, mesh, frames, static_ok=first_frame_only)
-    where = f"{layer_name(stage)}: {mesh_prim.GetPath()}"
-    geom = UsdGeom.Mesh(mesh_prim)
-    topology = read_topology(geom, where)
-    if time_codes is None:  # a static mesh: its default value
-        value = geom.GetPointsAttr().Get()
-        if value is None:
-            raise TakeError(f"{where}.points has no value")
-        time_codes, codes = np.zeros(1), [Usd.TimeCode.Default()]
-        points = np.asarray(value, dtype=np.float64)[None]
-    else:
-        time_codes = time_codes[:1] if first_frame_only else time_codes
-        codes = [Usd.TimeCode(float(t)) for t in time_codes]
-        points = read_vec3_samples(geom.GetPointsAttr(), time_codes, where + ".points").astype(np.float64)
-    ensure_plausible_points(points, time_codes, where + ".points")
-    if points.shape[1] != topology.point_count:
-        raise TakeError(f"{where}: {points.shape[1]} points but the topology indexes {topology.point_count}")
-    xforms = np.array([np.asarray(UsdGeom.XformCache(code).GetLocalToWorldTransform(mesh_prim)) for code in codes])
-    if not np.allclose(xforms, np.eye(4)):
-        points = np.einsum("fni,fij->fnj", points, xforms[:, :3, :3]) + xforms[:, None, 3, :3]
-    timing = Timing.from_stage(stage)
-    points = _to_canonical_axes(points * (timing.meters_per_unit / CENTIMETRES), timing.up_axis)
-    return CanonicalMesh(points.astype(np.float32), time_codes, timing.time_codes_per_second, topology, read_uvs(geom),
-                         str(mesh_prim.GetPath()), schema.FaceAttributes.read(mesh_prim),
-                         (timing.time_codes_per_second, timing.frames_per_second))
-
-
-def _import_usd(path: Path, usd, request: Request, progress: Progress) -> LayerOutput:
+def _usd_capture(path: Path, mesh, rate: float) -> _Capture:
+    """A USD mesh (facedyn.usd.source.MeshSource) as a take at its own rate, or resampled to `rate` (> 0)."""
     from facedyn.usd import schema
     from facedyn.usd.layers import LayerContent
     from facedyn.usd.takechecks import CENTIMETRES, frame_grid_problem
     from facedyn.usd.timing import Timing
 
-    mesh = read_usd_mesh(path, usd=usd)
     face = mesh.face
     face.role = "captured"
-    tcps, fps = mesh.source_fps
-    frames, points = mesh.frames, mesh.points
-    summary = {"source_mesh": mesh.prim_path, "points": mesh.points.shape[1], "fps": tcps}
-    rate = request.params["fps"]
-    if rate > 0 and not (rate == tcps and frame_grid_problem(frames, tcps) is None):
-        frames, points = resample(points, frames / tcps, rate, round(float(frames[0])), str(path))
+    tcps, fps = mesh.timing.time_codes_per_second, mesh.timing.frames_per_second
+    codes = frames = mesh.time_codes
+    summary = {"source_mesh": str(mesh.prim.GetPath()), "points": mesh.point_count, "fps": tcps}
+    resampler = None
+    if rate > 0 and not (rate == tcps and frame_grid_problem(codes, tcps) is None):
+        resampler = _resampler(codes / tcps, rate, str(path))
+        frames = round(float(codes[0])) + np.arange(resampler.count, dtype=np.float64)
+        summary.update(fps=rate, source_fps=tcps, source_frames=len(codes))
         tcps = fps = rate
-        summary.update(fps=rate, source_fps=mesh.source_fps[0], source_frames=len(mesh.frames))
-    layer = LayerContent(frames=frames, points=points, topology=mesh.topology, uvs=mesh.uvs, face=face,
-                         skull=schema.SkullAttributes(solver="identity"))
-    out_timing = Timing(tcps, fps, float(frames[0]), float(frames[-1]), CENTIMETRES, "Y")
-    return LayerOutput(layer=layer, timing=out_timing, inputs=[str(path)], define=True, summary=summary)
+    layer = LayerContent(frames=frames, topology=mesh.topology, uvs=mesh.uvs, face=face, skull=schema.SkullAttributes(solver="identity"))
+    timing = Timing(tcps, fps, float(frames[0]), float(frames[-1]), CENTIMETRES, "Y")
+    return _Capture(frames, lambda lo, hi: mesh.read(codes[lo:hi]), resampler, layer, timing, [str(path)], summary)
 
 
-def _import_obj(paths: list[Path], request: Request, progress: Progress) -> LayerOutput:
-    from facedyn.io.obj import read_obj_sequence
+def _obj_frames(paths: list[Path], frame_range: tuple[float, float] | None) -> tuple[list[Path], np.ndarray]:
+    """The OBJ files to import (those in --frames) and their frame numbers."""
+    frames = _frame_numbers(paths)
+    if frame_range is not None:
+        keep = (frames >= frame_range[0]) & (frames <= frame_range[1])
+        if not keep.any():
+            raise UsageError(f"no OBJ frame in {frame_range[0]:g}:{frame_range[1]:g}")
+        paths, frames = [p for p, k in zip(paths, keep) if k], frames[keep]
+    return paths, frames
+
+
+def _obj_capture(paths: list[Path], frames: np.ndarray, sequence, params: dict) -> _Capture:
+    """An OBJ sequence (facedyn.io.obj.ObjFrames) at --fps, scaled by --units, gaps in its frame numbers filled."""
     from facedyn.performance import Topology
     from facedyn.usd import schema
     from facedyn.usd.layers import LayerContent
     from facedyn.usd.takechecks import CENTIMETRES, frame_grid_problem
     from facedyn.usd.timing import Timing
 
-    fps = _require_fps(request)
-    frames = _frame_numbers(paths)
-    if request.frames is not None:
-        keep = (frames >= request.frames[0]) & (frames <= request.frames[1])
-        if not keep.any():
-            raise UsageError(f"no OBJ frame in {request.frames[0]:g}:{request.frames[1]:g}")
-        paths, frames = [p for p, k in zip(paths, keep) if k], frames[keep]
-    sequence = read_obj_sequence(paths, progress=progress)
-    points = (sequence.points * request.params["units"]).astype(np.float32)
-    read_frames = len(frames)
+    fps, units = params["fps"], params["units"]
+    resampler, filled = None, frames
     if frame_grid_problem(frames, fps) is not None:  # gaps in the frame numbers
-        frames, points = resample(points, frames / fps, fps, frames[0], str(paths[0].parent))
-    layer = LayerContent(
-        frames=frames,
-        points=points,
-        topology=Topology(sequence.face_vertex_counts, sequence.face_vertex_indices),
-        uvs=sequence.uvs,
-        face=schema.FaceAttributes(role="captured"),
-        skull=schema.SkullAttributes(solver="identity"),
-    )
-    timing = Timing(fps, fps, float(frames[0]), float(frames[-1]), CENTIMETRES, "Y")
-    summary = {"obj_files": len(paths), "points": points.shape[1], "fps": fps, "filled_frames": len(frames) - read_frames}
-    return LayerOutput(layer=layer, timing=timing, inputs=[str(p) for p in paths], define=True, summary=summary)
+        resampler = _resampler(frames / fps, fps, str(paths[0].parent))
+        filled = frames[0] + np.arange(resampler.count, dtype=np.float64)
+    first = sequence.first
+    layer = LayerContent(frames=filled, topology=Topology(first.face_vertex_counts, first.face_vertex_indices), uvs=sequence.uvs,
+                         face=schema.FaceAttributes(role="captured"), skull=schema.SkullAttributes(solver="identity"))
+    timing = Timing(fps, fps, float(filled[0]), float(filled[-1]), CENTIMETRES, "Y")
+    summary = {"obj_files": len(paths), "points": len(first.points), "fps": fps, "filled_frames": len(filled) - len(frames)}
+    return _Capture(filled, lambda lo, hi: (sequence.read(lo, hi) * units).astype(np.float32), resampler, layer, timing,
+                    [str(p) for p in paths], summary)
 
 
-def resample(points: np.ndarray, seconds: np.ndarray, rate: float, first_frame: float, source: str) -> tuple[np.ndarray, np.ndarray]:
-    """(frames, points) on whole frames first_frame, first_frame + 1, ... every 1/rate s from the first sample.
-
-    points (F, N, 3) sampled at increasing `seconds` are interpolated over time by a cubic
-    spline (not-a-knot ends; quadratic or linear when there are only 3 or 2 samples), which
-    reproduces motion that is a cubic polynomial in time exactly; samples already on the
-    grid come back unchanged up to float32 rounding. `source` names the input in errors.
-    """
-    from scipy.interpolate import make_interp_spline
-
+def _resampler(seconds: np.ndarray, rate: float, source: str) -> CubicResampler:
+    """The cubic resampler onto whole frames at `rate`; a grid of more than MAX_RESAMPLED_FRAMES is refused before anything is read."""
     from facedyn.usd.errors import TakeError
 
-    count = int(np.floor((seconds[-1] - seconds[0]) * rate + 1e-6)) + 1
-    size = count * points.shape[1] * 3 * 4
-    if size > MAX_RESAMPLED_BYTES:
-        raise TakeError(f"{source}: resampled to {rate:g} fps the capture would hold {count} frames ({size / 2**30:.1f} GiB); "
-                        f"import a shorter range with --frames")
-    frames = first_frame + np.arange(count, dtype=np.float64)
-    if len(seconds) == 1:
-        return frames, points.astype(np.float32)
-    spline = make_interp_spline(seconds, points.astype(np.float64), k=min(3, len(seconds) - 1), axis=0)
-    grid = seconds[0] + np.arange(count, dtype=np.float64) / rate
-    return frames, spline(np.minimum(grid, seconds[-1])).astype(np.float32)
+    span = (seconds[-1] - seconds[0]) * rate
+    if not span < MAX_RESAMPLED_FRAMES:
+        raise TakeError(f"{source}: resampled to {rate:g} fps the capture would hold {span + 1:.0f} frames (more than "
+                        f"{MAX_RESAMPLED_FRAMES:,}); check --fps, or import a shorter range with --frames")
+    return CubicResampler(seconds, rate)
 
 
 def _frame_number_key(path: Path):
@@ -283,10 +234,3 @@ def _frame_numbers(paths: list[Path]) -> np.ndarray:
     if all(numbers) and len({int(m.group(1)) for m in numbers}) == len(paths):
         return np.array([int(m.group(1)) for m in numbers], dtype=np.float64)
     return np.arange(1, len(paths) + 1, dtype=np.float64)
-
-
-def _to_canonical_axes(points: np.ndarray, up_axis: str) -> np.ndarray:
-    """Z-up scenes are turned Y-up (x, y, z) -> (x, z, -y); Y-up ones are left alone."""
-    if up_axis == "Z":
-        return np.stack([points[..., 0], points[..., 2], -points[..., 1]], axis=-1)
-    return points
