@@ -21,6 +21,7 @@ the layer or its take root exists.
 from __future__ import annotations
 
 import glob
+import itertools
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -134,8 +135,11 @@ class _Capture:
     summary: dict
 
     def output(self, progress: Progress) -> LayerOutput:
+        """The layer, its first chunk read now: before the runner locks the take root, so a fault there leaves no file at all."""
+        chunks = self.chunks(progress)
+        first = next(chunks)
         return LayerOutput(layer=self.layer, timing=self.timing, inputs=self.inputs, define=True, summary=self.summary,
-                           chunks=self.chunks(progress))
+                           chunks=itertools.chain([first], chunks))
 
     def chunks(self, progress: Progress):
         """The layer's points CHUNK_FRAMES frames at a time, each from the source samples it needs (read as it is written)."""
@@ -146,11 +150,12 @@ class _Capture:
             windows = (SplineWindow(a, min(a + CHUNK_FRAMES, count), a, min(a + CHUNK_FRAMES, count)) for a in range(0, count, CHUNK_FRAMES))
         else:
             windows = self.resampler.windows(CHUNK_FRAMES)
-        progress.start("import", count)
         for window in windows:
             points = self.read(window.lo, window.hi)
             if self.resampler is not None:
                 points = self.resampler.resample(window, points)
+            if window.start == 0:  # started once the first chunk reads: a fault in a short take is one line
+                progress.start("import", count)
             yield LayerContent(frames=self.frames[window.start:window.stop], points=points)
             progress.advance(window.stop - window.start)
         progress.finish()
