@@ -67,6 +67,9 @@ dominant by 2 (any sample spacing), so their influence at least halves per sampl
 64 samples (2**-64) it is below float64 rounding, and the chunk equals the whole spline."""
 
 
+COLUMN_BLOCK = 256  # spline columns (coordinates) solved at a time
+
+
 @dataclass(frozen=True)
 class SplineWindow:
     """Output frames [start, stop) of the new grid, computed from the source samples [lo, hi)."""
@@ -113,10 +116,20 @@ class CubicResampler:
             yield SplineWindow(start, stop, lo, hi)
 
     def resample(self, window: SplineWindow, values: np.ndarray) -> np.ndarray:
-        """float32 values (stop - start, ...) on the window's grid frames, from the (hi - lo, ...) values at its samples."""
-        from scipy.interpolate import make_interp_spline
+        """float32 values (stop - start, ...) on the window's grid frames, from the (hi - lo, ...) values at its samples.
 
+        The spline's coefficients are solved COLUMN_BLOCK columns at a time: LAPACK's banded
+        solve sweeps every column's rows once per row, which stays in cache only for a few
+        hundred columns (about 3x faster on 12,000 columns; each column's result is the same).
+        """
+        from scipy.interpolate import BSpline, make_interp_spline
+
+        values = np.asarray(values)
         if self.seconds.size == 1:
-            return np.asarray(values, dtype=np.float32)
-        spline = make_interp_spline(self.seconds[window.lo:window.hi], np.asarray(values, dtype=np.float64), k=self.degree, axis=0)
-        return spline(self.times(window.start, window.stop)).astype(np.float32)
+            return values.astype(np.float32)
+        seconds, columns = self.seconds[window.lo:window.hi], values.reshape(len(values), -1).astype(np.float64)
+        splines = [make_interp_spline(seconds, columns[:, a:a + COLUMN_BLOCK], k=self.degree, axis=0)
+                   for a in range(0, columns.shape[1], COLUMN_BLOCK)]
+        spline = BSpline.construct_fast(splines[0].t, np.concatenate([s.c for s in splines], axis=1), self.degree)
+        resampled = spline(self.times(window.start, window.stop))
+        return resampled.reshape((window.stop - window.start,) + values.shape[1:]).astype(np.float32)
