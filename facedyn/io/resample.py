@@ -118,18 +118,20 @@ class CubicResampler:
     def resample(self, window: SplineWindow, values: np.ndarray) -> np.ndarray:
         """float32 values (stop - start, ...) on the window's grid frames, from the (hi - lo, ...) values at its samples.
 
-        The spline's coefficients are solved COLUMN_BLOCK columns at a time: LAPACK's banded
-        solve sweeps every column's rows once per row, which stays in cache only for a few
-        hundred columns (about 3x faster on 12,000 columns; each column's result is the same).
+        The columns (coordinates) go COLUMN_BLOCK at a time: LAPACK's banded solve sweeps
+        every column's rows once per row, which stays in cache only for a few hundred columns
+        (about 3x faster on 12,000 columns; each column's result is the same), and only a
+        block is ever held in float64.
         """
-        from scipy.interpolate import BSpline, make_interp_spline
+        from scipy.interpolate import make_interp_spline
 
         values = np.asarray(values)
         if self.seconds.size == 1:
             return values.astype(np.float32)
-        seconds, columns = self.seconds[window.lo:window.hi], values.reshape(len(values), -1).astype(np.float64)
-        splines = [make_interp_spline(seconds, columns[:, a:a + COLUMN_BLOCK], k=self.degree, axis=0)
-                   for a in range(0, columns.shape[1], COLUMN_BLOCK)]
-        spline = BSpline.construct_fast(splines[0].t, np.concatenate([s.c for s in splines], axis=1), self.degree)
-        resampled = spline(self.times(window.start, window.stop))
-        return resampled.reshape((window.stop - window.start,) + values.shape[1:]).astype(np.float32)
+        seconds, times = self.seconds[window.lo:window.hi], self.times(window.start, window.stop)
+        columns = values.reshape(len(values), -1)
+        resampled = np.empty((len(times), columns.shape[1]), dtype=np.float32)
+        for a in range(0, columns.shape[1], COLUMN_BLOCK):
+            block = columns[:, a:a + COLUMN_BLOCK].astype(np.float64)
+            resampled[:, a:a + COLUMN_BLOCK] = make_interp_spline(seconds, block, k=self.degree, axis=0)(times)
+        return resampled.reshape((len(times),) + values.shape[1:])

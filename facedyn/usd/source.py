@@ -24,6 +24,8 @@ from facedyn.usd.take import (ensure_plausible_points, find_animated_meshes, rea
 from facedyn.usd.takechecks import CENTIMETRES
 from facedyn.usd.timing import Timing
 
+BLOCK_FRAMES = 128  # frames converted in float64 at a time
+
 
 @dataclass
 class MeshSource:
@@ -49,26 +51,35 @@ class MeshSource:
         """(F, N, 3) float32 points at `time_codes` (None: the static value) in world space, centimetres, Y up.
 
         Each frame is checked (finite, a plausible shape, as many points as the topology
-        indexes) as it is read, so a fault is found in whichever range holds it.
+        indexes) as it is read, so a fault is found in whichever range holds it. The
+        conversion runs in float64, BLOCK_FRAMES frames at a time, so that only the float32
+        result is held whole.
         """
         geom = UsdGeom.Mesh(self.prim)
         if time_codes is None:
             value = geom.GetPointsAttr().Get()
             if value is None:
                 raise TakeError(f"{self.where}.points has no value")
-            stamps, codes = np.zeros(1), [Usd.TimeCode.Default()]
-            points = np.asarray(value, dtype=np.float64)[None]
+            stamps = np.zeros(1)
+            points = np.asarray(value, dtype=np.float32)[None]
         else:
-            stamps, codes = time_codes, [Usd.TimeCode(float(t)) for t in time_codes]
-            points = read_vec3_samples(geom.GetPointsAttr(), time_codes, self.where + ".points").astype(np.float64)
+            stamps = np.asarray(time_codes, dtype=np.float64)
+            points = read_vec3_samples(geom.GetPointsAttr(), stamps, self.where + ".points")
+        for a in range(0, len(points), BLOCK_FRAMES):
+            points[a:a + BLOCK_FRAMES] = self._canonical(points[a:a + BLOCK_FRAMES], stamps[a:a + BLOCK_FRAMES], time_codes is None)
+        return points
+
+    def _canonical(self, points: np.ndarray, stamps: np.ndarray, static: bool) -> np.ndarray:
+        """Frames of source points checked, then in world space, centimetres, Y up (float64)."""
+        points = points.astype(np.float64)
         ensure_plausible_points(points, stamps, self.where + ".points")
         if points.shape[1] != self.point_count:
             raise TakeError(f"{self.where}: {points.shape[1]} points but the topology indexes {self.point_count}")
+        codes = [Usd.TimeCode.Default()] if static else [Usd.TimeCode(float(t)) for t in stamps]
         xforms = np.array([np.asarray(UsdGeom.XformCache(code).GetLocalToWorldTransform(self.prim)) for code in codes])
         if not np.allclose(xforms, np.eye(4)):
             points = np.einsum("fni,fij->fnj", points, xforms[:, :3, :3]) + xforms[:, None, 3, :3]
-        points = _to_canonical_axes(points * (self.timing.meters_per_unit / CENTIMETRES), self.timing.up_axis)
-        return points.astype(np.float32)
+        return _to_canonical_axes(points * (self.timing.meters_per_unit / CENTIMETRES), self.timing.up_axis)
 
 
 def open_mesh_source(path: Path, mesh: str = "", frames: tuple[float, float] | None = None, static_ok: bool = False,
