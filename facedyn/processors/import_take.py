@@ -146,8 +146,8 @@ class _Capture:
         from facedyn.usd.layers import LayerContent
 
         count = len(self.frames)
-        if self.resampler is None:
-            windows = (SplineWindow(a, min(a + CHUNK_FRAMES, count), a, min(a + CHUNK_FRAMES, count)) for a in range(0, count, CHUNK_FRAMES))
+        if self.resampler is None:  # each chunk is its own samples
+            windows = (SplineWindow(a, b, a, b) for a in range(0, count, CHUNK_FRAMES) for b in [min(a + CHUNK_FRAMES, count)])
         else:
             windows = self.resampler.windows(CHUNK_FRAMES)
         for window in windows:
@@ -163,13 +163,9 @@ class _Capture:
 
 def _usd_capture(path: Path, mesh, rate: float) -> _Capture:
     """A USD mesh (facedyn.usd.source.MeshSource) as a take at its own rate, or resampled to `rate` (> 0)."""
-    from facedyn.usd import schema
-    from facedyn.usd.layers import LayerContent
-    from facedyn.usd.takechecks import CENTIMETRES, frame_grid_problem
-    from facedyn.usd.timing import Timing
+    from facedyn.usd.takechecks import frame_grid_problem
 
-    face = mesh.face
-    face.role = "captured"
+    mesh.face.role = "captured"
     tcps, fps = mesh.timing.time_codes_per_second, mesh.timing.frames_per_second
     codes = frames = mesh.time_codes
     summary = {"source_mesh": str(mesh.prim.GetPath()), "points": mesh.point_count, "fps": tcps}
@@ -179,8 +175,7 @@ def _usd_capture(path: Path, mesh, rate: float) -> _Capture:
         frames = round(float(codes[0])) + np.arange(resampler.count, dtype=np.float64)
         summary.update(fps=rate, source_fps=tcps, source_frames=len(codes))
         tcps = fps = rate
-    layer = LayerContent(frames=frames, topology=mesh.topology, uvs=mesh.uvs, face=face, skull=schema.SkullAttributes(solver="identity"))
-    timing = Timing(tcps, fps, float(frames[0]), float(frames[-1]), CENTIMETRES, "Y")
+    layer, timing = _capture_layer(frames, tcps, fps, mesh.topology, mesh.uvs, mesh.face)
     return _Capture(frames, lambda lo, hi: mesh.read(codes[lo:hi]), resampler, layer, timing, [str(path)], summary)
 
 
@@ -199,9 +194,7 @@ def _obj_capture(paths: list[Path], frames: np.ndarray, sequence, params: dict) 
     """An OBJ sequence (facedyn.io.obj.ObjFrames) at --fps, scaled by --units, gaps in its frame numbers filled."""
     from facedyn.performance import Topology
     from facedyn.usd import schema
-    from facedyn.usd.layers import LayerContent
-    from facedyn.usd.takechecks import CENTIMETRES, frame_grid_problem
-    from facedyn.usd.timing import Timing
+    from facedyn.usd.takechecks import frame_grid_problem
 
     fps, units = params["fps"], params["units"]
     resampler, filled = None, frames
@@ -209,12 +202,22 @@ def _obj_capture(paths: list[Path], frames: np.ndarray, sequence, params: dict) 
         resampler = _resampler(frames / fps, fps, str(paths[0].parent))
         filled = frames[0] + np.arange(resampler.count, dtype=np.float64)
     first = sequence.first
-    layer = LayerContent(frames=filled, topology=Topology(first.face_vertex_counts, first.face_vertex_indices), uvs=sequence.uvs,
-                         face=schema.FaceAttributes(role="captured"), skull=schema.SkullAttributes(solver="identity"))
-    timing = Timing(fps, fps, float(filled[0]), float(filled[-1]), CENTIMETRES, "Y")
+    layer, timing = _capture_layer(filled, fps, fps, Topology(first.face_vertex_counts, first.face_vertex_indices), sequence.uvs,
+                                   schema.FaceAttributes(role="captured"))
     summary = {"obj_files": len(paths), "points": len(first.points), "fps": fps, "filled_frames": len(filled) - len(frames)}
     return _Capture(filled, lambda lo, hi: (sequence.read(lo, hi) * units).astype(np.float32), resampler, layer, timing,
                     [str(p) for p in paths], summary)
+
+
+def _capture_layer(frames: np.ndarray, time_codes_per_second: float, fps: float, topology, uvs, face):
+    """The capture layer's static values (its mesh defined, the skull at the identity) and the take's timing."""
+    from facedyn.usd import schema
+    from facedyn.usd.layers import LayerContent
+    from facedyn.usd.takechecks import CENTIMETRES
+    from facedyn.usd.timing import Timing
+
+    layer = LayerContent(frames=frames, topology=topology, uvs=uvs, face=face, skull=schema.SkullAttributes(solver="identity"))
+    return layer, Timing(time_codes_per_second, fps, float(frames[0]), float(frames[-1]), CENTIMETRES, "Y")
 
 
 def _resampler(seconds: np.ndarray, rate: float, source: str) -> CubicResampler:
