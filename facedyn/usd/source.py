@@ -61,7 +61,7 @@ class MeshSource:
             if value is None:
                 raise TakeError(f"{self.where}.points has no value")
             stamps = np.zeros(1)
-            points = np.asarray(value, dtype=np.float32)[None]
+            points = np.array(value, dtype=np.float32)[None]  # a copy: USD's own array is read-only
         else:
             stamps = np.asarray(time_codes, dtype=np.float64)
             points = read_vec3_samples(geom.GetPointsAttr(), stamps, self.where + ".points")

@@ -15,6 +15,7 @@ from facedyn.cli import main
 from facedyn.io.obj import ObjMesh, write_obj
 from facedyn.processors import import_take
 from facedyn.usd import clips
+from facedyn.usd.source import read_usd_mesh
 from facedyn.usd.take import read_take
 
 from usd_fixtures import grid_mesh, write_mesh_cache
@@ -140,3 +141,23 @@ def test_a_fault_in_a_later_chunk_leaves_nothing_behind(tmp_path, monkeypatch, c
     # No layer, no take root, no clips, no temporary files: only the take root's (kept, empty) lock file,
     # taken before the write (a fault in the first chunk comes before it: tests/test_cli.py).
     assert os.listdir(out) == [".take.usda.lock"]
+
+
+def test_a_static_mesh_and_a_first_frame_read_canonical(tmp_path):
+    """What `actor --from neutral` reads: an animated mesh's first frame, or a static mesh's value, in cm, Y up."""
+    values = _motion(3, 6)
+    _, counts, indices = grid_mesh(3)
+    source = write_mesh_cache(tmp_path / "mesh.usdc", values, counts, indices, up_axis="Z", meters_per_unit=0.1)
+    y_up_cm = lambda p: np.stack([p[..., 0], p[..., 2], -p[..., 1]], axis=-1) * 10.0  # noqa: E731
+    first = read_usd_mesh(source, first_frame_only=True)
+    np.testing.assert_allclose(first.points, y_up_cm(values[:1]), atol=1e-5)
+    assert first.frames.tolist() == [1001.0]
+    stage = Usd.Stage.Open(str(source))
+    attr = stage.GetPrimAtPath("/Cache/Geo/Face").GetAttribute("points")
+    value = attr.Get(1002)
+    attr.Clear()
+    attr.Set(value)  # a static mesh: a default value, no time samples
+    stage.Save()
+    static = read_usd_mesh(source, first_frame_only=True)
+    np.testing.assert_allclose(static.points, y_up_cm(values[1:2]), atol=1e-5)
+    assert static.frames.tolist() == [0.0]
