@@ -30,6 +30,8 @@ class TrainRemovalProcessor(Processor):
         Parameter("skull_features", str, "velocity",
                   "F's skull input: the paper's landmark velocities over t-10..t+10, or accelerations over t-30..t+10",
                   ("velocity", "acceleration")),
+        Parameter("sample_positions", bool, False,
+                  "F also reads each skin sample's rest position (where on the face it is; beyond the paper)"),
         *TRAINING_PARAMETERS,
     )
 
@@ -53,7 +55,7 @@ class TrainRemovalProcessor(Processor):
         request, takes, truths, face, frame = plan.state
         params = request.params
         config = TrainConfig(epochs=params["epochs"], subsample=params["subsample"], validation=validation_names(params),
-                             seed=params["seed"], device=params["device"], target=params["target"],
+                             seed=params["seed"], device=params["device"], target=params["target"], sample_positions=params["sample_positions"],
                              skull_motion=NAMED[params["skull_features"]] if params["skull_features"] == "acceleration" else None)
         training = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
         if truths is not None:
