@@ -123,6 +123,8 @@ def skull_motion(spec: TakeSpec) -> motion.SkullTrajectory:
 def expression_weights(rig: FaceRig, spec: TakeSpec, frame_count: int) -> np.ndarray:
     """(F, K) weights: neutral, a held expression eased in over 0.3 s, dialog curves or procedural speech."""
     if spec.speech:
+        if spec.dialog is not None or spec.expression is not None:
+            raise ValueError(f"take {spec.name}: a procedural speech take has no held expression or dialog curves of its own")
         return speech_weights(rig.expression_names, frame_count, spec.fps, spec.seed)
     weights = np.zeros((frame_count, rig.expression_count), np.float32)
     if spec.dialog is not None:

@@ -1,8 +1,8 @@
 """F reading each skin sample's rest position beside its velocities (TrainConfig.sample_positions)."""
 import numpy as np
 import pytest
-import torch
 from synthetic_face import curved_sheet, jiggle, platform_motion, top_rows
+from test_removal_arrays import one_torch_thread  # noqa: F401 (an autouse fixture: one torch thread)
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import load_model, save_model
@@ -12,14 +12,6 @@ from facedyn.dynamics.training import TrainConfig, TrainingSequence, train_remov
 
 ROWS, COLS, FPS = 12, 10, 120.0
 NOISE_CM = 0.02  # tracking noise: its velocity (about 3 cm/s) swamps the slow offsets' (about 0.6 cm/s)
-
-
-@pytest.fixture(scope="module", autouse=True)
-def one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 @pytest.fixture(scope="module")

@@ -47,6 +47,8 @@ def test_speech_takes_are_performances_of_the_protocol_under_every_motion():
     assert len({s.seed for s in speech}) == len(speech) and len({s.name for s in specs}) == len(specs)
     weights = expression_weights(rig, speech[0], 240)
     assert np.array_equal(weights, speech_weights(rig.expression_names, 240, speech[0].fps, speech[0].seed))
+    with pytest.raises(ValueError, match="no held expression or dialog"):
+        expression_weights(rig, TakeSpec("both", "still", "smile", speech=True), 10)
     # the expression alone never forces the tissue: a talking face on a still head has no dynamics
     still = simulate_take(rig, TakeSpec("talk", "still", speech=True, duration_s=0.5, seed=1))
     assert still.weights.std(axis=0).max() > 0.05
