@@ -1,12 +1,14 @@
 """`usdfacedyn demo`: the whole pipeline on the built-in face, measured against truth.
 
-1. simulate a small corpus (the papers' protocol at demo scale) with known truth;
+1. simulate a small corpus (the papers' protocol at demo scale, with a procedural talking
+   face under every motion: facedyn.sim.speech) with known truth;
 2. simulate a new performance (a held smile while walking, with tracking noise);
 3. make the actor from the rig (`usdfacedyn actor`: the skull frame the corpus and the
    models share) and stabilize the take into it (mode pursuit with --actor, and the
    three-point baseline for comparison);
 4. train the removal network F the recommended way (the corpus's true dynamics, skull
-   landmark accelerations over t-30..t+10) and remove the performance's dynamics;
+   landmark accelerations over t-30..t+10, each skin sample's rest position) and remove the
+   performance's dynamics;
 5. train the synthesis network H on that F's quasistatic output and re-synthesize the
    dynamics under the take's own motion and under a new motion (hopping), which is also
    simulated for the truth;
@@ -31,9 +33,9 @@ from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Re
 from facedyn.progress import Progress
 
 SCALES = {
-    # corpus scale, performance length (s), F epochs and subsample, H epochs
-    "demo": {"corpus": "demo", "seconds": 3.0, "f_epochs": 8, "f_subsample": 0.5, "h_epochs": 20},
-    "standard": {"corpus": "standard", "seconds": 6.0, "f_epochs": 20, "f_subsample": 0.25, "h_epochs": 30},
+    # corpus scale, performance length (s), F epochs, subsample and batch size, H epochs
+    "demo": {"corpus": "demo", "seconds": 3.0, "f_epochs": 8, "f_subsample": 0.4, "f_batch": 2000, "h_epochs": 20},
+    "standard": {"corpus": "standard", "seconds": 6.0, "f_epochs": 20, "f_subsample": 0.25, "f_batch": 2000, "h_epochs": 30},
 }
 
 
@@ -48,7 +50,8 @@ MEANINGS = {
     "synthesized vs simulated truth (hop)": "H's dynamics under a new motion (hopping) against the simulator's dynamics for that motion: the synthesis figure",
 }
 PATH = ("recommended path: actor from the rig (the skull frame), take stabilized into it (solved skull, not the true one); "
-        "F trained on the corpus's true dynamics with skull landmark accelerations; H trained on that F's output. "
+        "F trained on the corpus's true dynamics (held expressions and a procedural talking face) with skull landmark "
+        "accelerations and each skin sample's rest position; H trained on that F's output. "
         "Test take and corpus come from the same simulator (facedyn.sim.tissue, default tissue): an in-simulator figure; "
         "benchmarks/bench_cross_sim.py measures a physics training never saw.")
 
@@ -141,8 +144,8 @@ class Demo:
 
         model = models / "actor.removal"
         report = self.step("train removal network F", lambda: self.process(
-            "train-removal", [corpus], model, skull="truth", target="truth", skull_features="acceleration",
-            epochs=self.settings["f_epochs"], subsample=self.settings["f_subsample"], exclude="dialog*"))["summary"]
+            "train-removal", [corpus], model, skull="truth", target="truth", skull_features="acceleration", sample_positions=True,
+            epochs=self.settings["f_epochs"], subsample=self.settings["f_subsample"], batch_size=self.settings["f_batch"]))["summary"]
         self.step("remove dynamics", lambda: self.process("remove", [root], take_dir / "quasistatic.usdc", root, model=str(model)))
         removed, _ = read_take(root)
         self.removed = removed
@@ -163,7 +166,7 @@ class Demo:
         model = models / "actor.synthesis"
         report = self.step("train synthesis network H", lambda: self.process(
             "train-synthesis", [corpus], model, quasistatic=str(models / "actor.removal"), skull="truth",
-            epochs=self.settings["h_epochs"], exclude="dialog*"))["summary"]
+            epochs=self.settings["h_epochs"]))["summary"]
         scratch = take_dir / "baselines"
         self.step("re-synthesize under the take's own motion",
                   lambda: self.process("synthesize", [root], scratch / "synthesized.own.usdc", model=str(model)))

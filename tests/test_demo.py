@@ -10,6 +10,7 @@ import torch
 from facedyn.cli import main
 from facedyn.demo import format_summary
 from facedyn.dynamics.modelfile import load_model
+from facedyn.dynamics.removal import SAMPLE_POSITIONS
 from facedyn.dynamics.skull_motion import NAMED
 from facedyn.processors.training_inputs import take_skull_frame
 from facedyn.usd.actor import read_actor
@@ -36,6 +37,8 @@ def test_the_demo_runs_the_recommended_path_end_to_end_and_beats_doing_nothing(t
     # the recommended path: F on true dynamics with skull accelerations, H through that F, the actor's frame
     removal = load_model(out / "models" / "actor.removal")
     assert removal.info["training"]["config"]["target"] == "truth" and removal.skull_motion == NAMED["acceleration"]
+    assert SAMPLE_POSITIONS in removal.arrays  # F knows where each skin sample is
+    assert any(t["name"].startswith("dialog_speech_") and not t["validation"] for t in removal.info["training"]["takes"])
     synthesis = load_model(out / "models" / "actor.synthesis")
     assert synthesis.face.samples.tolist() == removal.face.samples.tolist()  # H learned from that F's output
     stabilized, _ = read_take(out / "take" / "take.usda")

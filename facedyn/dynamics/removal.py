@@ -1,7 +1,7 @@
 """Removing secondary dynamics from a take with a trained network F (papers/000 eq. 7).
 
-For every frame and skin sample, F(B(t), X_i(t)) predicts the dynamic offset dx_i(t), a
-skull-frame vector; Laplacian deformation spreads the sample offsets to every vertex
+For every frame and skin sample, F(B(t), X_i(t)) (and the sample's rest position p_i, for a
+model trained with it: ``skin_inputs``) predicts the dynamic offset dx_i(t), a skull-frame vector; Laplacian deformation spreads the sample offsets to every vertex
 (facedyn.dynamics.propagate), and the quasistatic skin in skull space is
 
     T(t)^-1 y(t) = T(t)^-1 x(t) - dx(t)        (eq. 7, y = x - T(t) F, read in skull space)
@@ -23,6 +23,25 @@ from facedyn.dynamics.skull import check_points, check_transforms
 from facedyn.geometry import quaternion
 
 CHUNK_FRAMES = 128
+SAMPLE_POSITIONS = "sample_positions"  # the model array of F's per-sample position input, when it reads one
+
+
+def sample_positions(face) -> np.ndarray:
+    """(S, 3) float32 rest positions of the face setup's skin samples, skull space."""
+    return np.asarray(face.rest_points, dtype=np.float32)[face.samples]
+
+
+def skin_inputs(skin: np.ndarray, positions: np.ndarray | None) -> np.ndarray:
+    """F's per-sample inputs: the skin features X_i(t) (F, S, D), then p_i when F reads positions.
+
+    Beyond the paper: one network serves every sample, and X_i(t) (velocities) does not say
+    which sample it is looking at. The skull's acceleration differs over the face (the
+    rotational part grows with the distance from the axis) and so does the tissue (softer
+    on the cheeks than near the bone); the rest position tells F where the sample is.
+    """
+    if positions is None:
+        return skin
+    return np.concatenate([skin, np.broadcast_to(positions, skin.shape[:2] + (3,))], axis=-1)
 
 
 def remove_dynamics(
@@ -65,6 +84,10 @@ def remove_dynamics(
     network = model.network.to(resolve_device(device)).eval()
     dev = next(network.parameters()).device
     window = model.windows["skull"]
+    positions = model.arrays.get(SAMPLE_POSITIONS)
+    if positions is not None and np.shape(positions) != (len(model.face.samples), 3):
+        raise ValueError(f"the removal model's {SAMPLE_POSITIONS} are {np.shape(positions)}, not one 3-vector per skin sample "
+                         f"({len(model.face.samples)})")
     # facedyn's skull input (model.skull_motion) replaces the kernel's B(t): a few numbers per frame
     skull = None if model.skull_motion is None else model.skull_motion.features(t, q, model.face.landmarks, fps)
     offsets = np.empty((f, n, 3), np.float32)
@@ -73,7 +96,8 @@ def remove_dynamics(
             b = min(f, a + int(chunk_frames))
             feats = compute_features(sample_points, t, q, model.face.landmarks, fps, space=space, window=window, frame_range=(a, b), backend=backend)
             b_t = feats.skull if skull is None else skull[a:b]
-            d = network.forward_split(torch.from_numpy(b_t).to(dev), torch.from_numpy(feats.skin).to(dev))
+            skin = skin_inputs(feats.skin, positions)
+            d = network.forward_split(torch.from_numpy(b_t).to(dev), torch.from_numpy(np.ascontiguousarray(skin)).to(dev))
             propagator.apply_into(d.cpu().numpy(), offsets[a:b])
     quasistatic = skull_points - offsets
     return quasistatic, offsets

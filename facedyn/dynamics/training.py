@@ -1,8 +1,8 @@
 """Training the removal network F on held-expression takes (papers/000 §5.2).
 
 Every (frame, skin sample) pair of every take is one example: input [B(t), X_i(t)]
-(facedyn.dynamics.features), target the moving-average offset dx_i(t)
-(facedyn.dynamics.targets). L2 loss, Adam, lr 1e-3, batches of 10,000 pairs; the paper
+(facedyn.dynamics.features; with ``sample_positions`` also the sample's rest position p_i),
+target the moving-average offset dx_i(t) (facedyn.dynamics.targets). L2 loss, Adam, lr 1e-3, batches of 10,000 pairs; the paper
 trains about 250 epochs.
 
 Beyond the paper (its future work: "augmenting the corpus with physical simulation"), a
@@ -31,6 +31,7 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.features import WINDOW, check_fps, compute_features
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import Network, NetworkSpec, removal_spec, resolve_device
+from facedyn.dynamics.removal import SAMPLE_POSITIONS, sample_positions, skin_inputs
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.store import StreamedExamples, TrainingStore
@@ -87,6 +88,7 @@ class TrainConfig:
     device: str = "auto"  # "auto" = cuda when available, else cpu
     target: str = "moving-average"  # F's targets: "moving-average" (the paper) or "truth" (TrainingSequence.dynamics)
     skull_motion: SkullMotionInput | None = None  # skull features; None = the paper's B(t) over `window`
+    sample_positions: bool = False  # F also reads each skin sample's rest position (facedyn.dynamics.removal.skin_inputs)
     resident_bytes: int = 1 << 30  # examples held in memory at once; a larger corpus streams from its store in chunks
 
     def __post_init__(self) -> None:
@@ -228,6 +230,7 @@ def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig, backe
     t, q = check_transforms(take.translate, take.orient, f)
     samples = skull_space(pts[:, face.samples], t, q, take.space)
     skull = None if config.skull_motion is None else config.skull_motion.features(t, q, face.landmarks, take.fps)
+    positions = sample_positions(face) if config.sample_positions else None
     if config.target == "truth":
         if take.dynamics is None:
             raise ValueError(f"take {take.name!r} has no known dynamics to train on (target 'truth' needs a simulated corpus)")
@@ -242,7 +245,7 @@ def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig, backe
         chunk_targets = np.asarray(targets[a:b])
         if config.target == "truth":
             chunk_targets = chunk_targets[:, face.samples]
-        yield {"skull": feats.skull if skull is None else skull[a:b], "skin": feats.skin, "targets": chunk_targets}
+        yield {"skull": feats.skull if skull is None else skull[a:b], "skin": skin_inputs(feats.skin, positions), "targets": chunk_targets}
 
 
 def store_takes(takes: Iterable, prepare: Callable[[TrainingSequence], Iterator[dict[str, np.ndarray]]],
@@ -359,4 +362,6 @@ def train_removal(
         "loss_curve": curve,
     }
     windows = {"skull": config.window, "skin": config.window, "target": config.target_window}
-    return DynamicsModel(kind="removal", network=network, face=face, fps=fps, windows=windows, info=info, skull_motion=config.skull_motion)
+    arrays = {SAMPLE_POSITIONS: sample_positions(face)} if config.sample_positions else {}
+    return DynamicsModel(kind="removal", network=network, face=face, fps=fps, windows=windows, info=info, arrays=arrays,
+                         skull_motion=config.skull_motion)

@@ -24,12 +24,16 @@ class TrainRemovalProcessor(Processor):
     parameters = (
         Parameter("epochs", int, 250, "training epochs (the paper trains 250)", minimum=1, maximum=100000),
         Parameter("subsample", float, 1.0, "fraction of the (frame, sample) pairs drawn each epoch", above=0.0, maximum=1.0),
+        Parameter("batch_size", int, 10_000, "(frame, sample) pairs per optimizer step (the paper's 10,000; a short budget "
+                  "learns more from smaller batches)", minimum=1, maximum=10_000_000),
         Parameter("target", str, "moving-average",
                   "F's targets: the paper's moving-average offsets, or a simulated corpus's true dynamics (with --skull truth)",
                   ("moving-average", "truth")),
         Parameter("skull_features", str, "velocity",
                   "F's skull input: the paper's landmark velocities over t-10..t+10, or accelerations over t-30..t+10",
                   ("velocity", "acceleration")),
+        Parameter("sample_positions", bool, False,
+                  "F also reads each skin sample's rest position (where on the face it is; beyond the paper)"),
         *TRAINING_PARAMETERS,
     )
 
@@ -52,8 +56,8 @@ class TrainRemovalProcessor(Processor):
 
         request, takes, truths, face, frame = plan.state
         params = request.params
-        config = TrainConfig(epochs=params["epochs"], subsample=params["subsample"], validation=validation_names(params),
-                             seed=params["seed"], device=params["device"], target=params["target"],
+        config = TrainConfig(epochs=params["epochs"], subsample=params["subsample"], batch_size=params["batch_size"], validation=validation_names(params),
+                             seed=params["seed"], device=params["device"], target=params["target"], sample_positions=params["sample_positions"],
                              skull_motion=NAMED[params["skull_features"]] if params["skull_features"] == "acceleration" else None)
         training = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
         if truths is not None:

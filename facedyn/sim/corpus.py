@@ -7,7 +7,8 @@ the skull transforms, the quasistatic skin (the rig's shape plus the static grav
 the head's pose, facedyn.sim.tissue) and the offsets (the dynamics: what motion adds).
 
 Protocol (papers/000): per actor, neutral + 10 held expressions, each under stillness,
-walking, running, hopping and a platform at 6..11 Hz, about 3 s at 120 fps; plus dialog
+walking, running, hopping and a platform at 6..11 Hz, about 3 s at 120 fps; a procedural
+talking face under every protocol motion (facedyn.sim.speech, no data needed); plus dialog
 takes (Live Link curves): speech under real walking and hopping head motion (CMU), and at
 the standard scale six other performances (four speech, two range of motion) under every
 protocol motion.
@@ -26,6 +27,7 @@ import numpy as np
 from facedyn.geometry import quaternion
 from facedyn import motion
 from facedyn.sim.rig import FaceRig
+from facedyn.sim.speech import speech_weights
 from facedyn.sim import tissue as springs, volumetric
 from facedyn.sim.tissue import TissueParams
 from facedyn.sim.volumetric import VolumetricParams
@@ -68,6 +70,7 @@ class TakeSpec:
     motion: str  # still | walk | run | hop | dance | turn | jump | platform:HZ | bvh:PATH[#JOINT]
     expression: str | None = None  # a HELD_EXPRESSIONS key, None = neutral
     dialog: str | None = None  # a Live Link Face CSV driving the expression instead
+    speech: bool = False  # a procedural talking face drawn from `seed` instead (facedyn.sim.speech)
     duration_s: float = 3.0
     fps: float = 120.0
     seed: int = 0
@@ -118,7 +121,11 @@ def skull_motion(spec: TakeSpec) -> motion.SkullTrajectory:
 
 
 def expression_weights(rig: FaceRig, spec: TakeSpec, frame_count: int) -> np.ndarray:
-    """(F, K) weights: neutral, a held expression eased in over 0.3 s, or dialog curves."""
+    """(F, K) weights: neutral, a held expression eased in over 0.3 s, dialog curves or procedural speech."""
+    if spec.speech:
+        if spec.dialog is not None or spec.expression is not None:
+            raise ValueError(f"take {spec.name}: a procedural speech take has no held expression or dialog curves of its own")
+        return speech_weights(rig.expression_names, frame_count, spec.fps, spec.seed)
     weights = np.zeros((frame_count, rig.expression_count), np.float32)
     if spec.dialog is not None:
         from facedyn.io.livelink import read_livelink_csv
@@ -164,7 +171,7 @@ def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | Volumetri
         quasistatic=(quasistatic + result.gravity_sag).astype(np.float32),
         offsets=result.dynamics.astype(np.float32),
         weights=weights,
-        info={"motion": spec.motion, "expression": spec.expression, "dialog": spec.dialog and Path(spec.dialog).name,
+        info={"motion": spec.motion, "expression": spec.expression, "dialog": spec.dialog and Path(spec.dialog).name, "speech": spec.speech,
               "physics": physics.__name__.rsplit(".", 1)[-1]},
     )
 
@@ -262,6 +269,7 @@ def _protocol_takes(rig: FaceRig, scale: str, data_dir: Path | None, seed: int, 
             specs.append(TakeSpec(f"{label}_{motion_label(kind)}", kind, expression, duration_s=duration, seed=take_seed, noise_cm=noise_cm))
             if expression is None and scale == "standard":
                 break  # the neutral is captured once, standing still
+    specs += speech_takes(motions, duration, seed + 3000, noise_cm)
     specs += dialog_takes(data_dir, dialog_s, seed + 1000, noise_cm)
     if scale == "standard":
         specs += performance_takes(data_dir, motions, duration, seed + 2000, noise_cm)
@@ -271,6 +279,16 @@ def _protocol_takes(rig: FaceRig, scale: str, data_dir: Path | None, seed: int, 
 def motion_label(kind: str) -> str:
     """A protocol motion as it reads in take names: walk, platform9hz."""
     return kind.replace(":", "") + ("hz" if kind.startswith("platform") else "")
+
+
+def speech_takes(motions, duration_s: float, seed: int, noise_cm: float) -> list[TakeSpec]:
+    """A procedural talking face (facedyn.sim.speech) under every protocol motion: performances
+    without downloaded data, so F and H see expressions change while the head moves.
+
+    Named dialog_* like the Live Link performances: the paper's F must not train on them.
+    """
+    return [TakeSpec(f"dialog_speech_{motion_label(kind)}", kind, speech=True, duration_s=duration_s, seed=seed + i, noise_cm=noise_cm)
+            for i, kind in enumerate(motions)]
 
 
 def dialog_takes(data_dir: Path | None, duration_s: float, seed: int, noise_cm: float) -> list[TakeSpec]:

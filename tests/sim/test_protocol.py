@@ -14,7 +14,7 @@ from facedyn.sim.volumetric import VolumetricParams
 def test_standard_protocol_captures_every_performance_under_every_motion(shared_data):
     rig = default_face()
     specs = protocol(rig, "standard", shared_data)
-    held = [s for s in specs if s.dialog is None]
+    held = [s for s in specs if s.dialog is None and not s.speech]
     assert len(held) == 1 + 10 * len(MOTIONS)  # the neutral once, standing still
     performances = [s for s in specs if s.dialog is not None and not s.dialog.endswith(SPEECH)]
     assert len(performances) == len(PERFORMANCES) * len(MOTIONS)
