@@ -13,14 +13,19 @@ TRAINING_PARAMETERS = (
     Parameter("skull", str, "take", "the takes' solved skull, or a simulated corpus's true skull", ("take", "truth")),
     Parameter("samples", int, 344, "skin samples when the takes (or the removal model) define none", minimum=1, maximum=100000),
     Parameter("validation", str, "", "comma-separated take names held out for validation (default: the last take)", metavar="NAMES"),
-    Parameter("include", str, "", "only takes whose name matches this glob pattern", metavar="PATTERN"),
-    Parameter("exclude", str, "", "leave out takes whose name matches this glob pattern", metavar="PATTERN"),
+    Parameter("include", str, "", "only takes whose name matches one of these comma-separated glob patterns", metavar="PATTERNS"),
+    Parameter("exclude", str, "", "leave out takes whose name matches one of these comma-separated glob patterns", metavar="PATTERNS"),
     Parameter("seed", int, 0, "seed of the network's initialization and the epochs' sampling", minimum=0, maximum=2**32 - 1),
     Parameter("device", str, "auto", "torch device: auto, cpu, cuda, cuda:N", check=check_device),
     Parameter("backend", str, "auto", "feature and stretch kernels", BACKENDS),
     Parameter("actor", Path, None, "the actor asset whose skin samples, landmarks and rigid region the model uses (default: "
               "the one the takes' roots record, else the first take's own)", metavar="ACTOR"),
 )
+
+
+def _matches(name: str, patterns: str) -> bool:
+    """Whether a take name matches any of the comma-separated glob patterns."""
+    return any(fnmatch.fnmatch(name, pattern.strip()) for pattern in patterns.split(",") if pattern.strip())
 
 
 def load_takes(inputs: list[Path], params: dict, progress: Progress) -> list:
@@ -30,9 +35,9 @@ def load_takes(inputs: list[Path], params: dict, progress: Progress) -> list:
 
     named = [(take_name(root), root) for root in take_roots(inputs)]
     if params["include"]:
-        named = [(n, r) for n, r in named if fnmatch.fnmatch(n, params["include"])]
+        named = [(n, r) for n, r in named if _matches(n, params["include"])]
     if params["exclude"]:
-        named = [(n, r) for n, r in named if not fnmatch.fnmatch(n, params["exclude"])]
+        named = [(n, r) for n, r in named if not _matches(n, params["exclude"])]
     if not named:
         raise UsageError("no take left to train on after --include/--exclude")
     missing = [name for name in validation_names(params) or () if name not in {n for n, _ in named}]
