@@ -214,9 +214,8 @@ def _whole_take_model(reader, params, weights, rest, three_point, schedule):
     aligned frames, or for the per-frame baselines the first frame.
     """
     from facedyn.geometry import rigid
-    from facedyn.stabilize import baselines
     from facedyn.stabilize import rest as rest_estimate
-    from facedyn.stabilize.api import INIT_ICP_ITERATIONS
+    from facedyn.stabilize.api import INIT_ICP_ITERATIONS, align_weighted
     from facedyn.stabilize.rigidity import SAMPLE_FRAMES, estimate_rigidity
 
     count = reader.frame_count
@@ -227,8 +226,8 @@ def _whole_take_model(reader, params, weights, rest, three_point, schedule):
         model = estimate_rigidity(sample)
         return model.weights, model.rest
     sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count)).world_points())
-    rot, trans = baselines.align_frames(sample, sample[0].astype(np.float64), params["init"], weights, three_point,
-                                        icp_iterations=INIT_ICP_ITERATIONS)
+    rot, trans = align_weighted(sample, sample[0].astype(np.float64), params["init"], weights, three_point,
+                                icp_iterations=INIT_ICP_ITERATIONS)
     return weights, rest_estimate.estimate_rest(rigid.apply(rot, trans, sample.astype(np.float64)), schedule.widths_pos[-1])
 
 

@@ -162,9 +162,9 @@ def stabilize(
         # an initialization only: the spline fit and the first (widest) stage absorb what
         # further reweighting would refine
         iterations = INIT_ICP_ITERATIONS
-        rot, trans = baselines.align_frames(world, target, init, weights, three_point, icp_iterations=iterations)
+        rot, trans = align_weighted(world, target, init, weights, three_point, icp_iterations=iterations)
     else:
-        rot, trans = baselines.align_frames(world, target, method, weights, three_point)
+        rot, trans = align_weighted(world, target, method, weights, three_point)
     timings["init"] = time.perf_counter() - t0
     if method != "mode-pursuit":
         world_to_skull = dualquat.from_translate_orient(trans, quaternion.from_matrix(rot))
@@ -213,6 +213,15 @@ def stabilize(
     result.history = out.history
     result.timings["total"] = time.perf_counter() - t_total
     return result
+
+
+def align_weighted(world, target, method, weights, three_point=None, **options):
+    """baselines.align_frames, fitting Procrustes and ICP on the vertices of positive weight only: the others add
+    nothing to the fit but would cost as much as the rigid region (a third of a face mesh or more)."""
+    if weights is None or method not in ("procrustes", "icp") or np.all(weights > 0):
+        return baselines.align_frames(world, target, method, weights, three_point, **options)
+    used = np.flatnonzero(weights > 0)
+    return baselines.align_frames(world[:, used], target[used], method, weights[used], **options)
 
 
 def _estimate_rest(world: np.ndarray, rot: np.ndarray, trans: np.ndarray, width: float, block: int = 512) -> np.ndarray:
