@@ -27,6 +27,7 @@ from facedyn.stabilize.schedule import Schedule
 METHODS = ("three-point", "procrustes", "icp", "mode-pursuit")
 SOLVERS = ("fast", "reference")
 INIT_ICP_ITERATIONS = 5
+INIT_VERTICES = 1024  # vertices the initial ICP fits on, at most: as accurate as all 2,590 of a face's rigid region
 
 
 @dataclass
@@ -97,6 +98,7 @@ def stabilize(
     chunk_frames: int = 4096,
     chunk_overlap: int = 128,
     reference_frame: int = 0,
+    first_frame: int = 0,
 ) -> StabilizeResult:
     """Solve the rigid skull motion of a tracked face mesh.
 
@@ -124,6 +126,8 @@ def stabilize(
     the paper's full continuation ``Schedule()`` otherwise.
     chunk_frames, chunk_overlap: takes longer than chunk_frames are solved in
     overlapping chunks with bounded memory, blended in the overlaps.
+    first_frame: where world_points start in a longer take (a streamed chunk of it):
+    the spline's knots lie on the take's grid (Schedule.coarse_knots).
     """
     t_total = time.perf_counter()
     if method not in METHODS:
@@ -162,7 +166,8 @@ def stabilize(
         # an initialization only: the spline fit and the first (widest) stage absorb what
         # further reweighting would refine
         iterations = INIT_ICP_ITERATIONS
-        rot, trans = align_weighted(world, target, init, weights, three_point, icp_iterations=iterations)
+        rot, trans = align_weighted(world, target, init, weights, three_point, icp_iterations=iterations,
+                                    most_vertices=INIT_VERTICES)
     else:
         rot, trans = align_weighted(world, target, method, weights, three_point)
     timings["init"] = time.perf_counter() - t0
@@ -200,6 +205,7 @@ def stabilize(
         stage_solver,
         chunk_frames,
         chunk_overlap,
+        first_frame,
     )
     timings.update(out.timings)
     result = finish(captured, out.world_to_skull, rest, active, method, solver, timings)
@@ -215,13 +221,18 @@ def stabilize(
     return result
 
 
-def align_weighted(world, target, method, weights, three_point=None, **options):
+def align_weighted(world, target, method, weights, three_point=None, most_vertices=None, **options):
     """baselines.align_frames, fitting Procrustes and ICP on the vertices of positive weight only: the others add
-    nothing to the fit but would cost as much as the rigid region (a third of a face mesh or more)."""
-    if weights is None or method not in ("procrustes", "icp") or np.all(weights > 0):
+    nothing to the fit but would cost as much as the rigid region (a third of a face mesh or more). most_vertices:
+    fit on at most that many of them, evenly strided (an initialization need not see every vertex)."""
+    if method not in ("procrustes", "icp"):
         return baselines.align_frames(world, target, method, weights, three_point, **options)
-    used = np.flatnonzero(weights > 0)
-    return baselines.align_frames(world[:, used], target[used], method, weights[used], **options)
+    used = np.arange(world.shape[1]) if weights is None else np.flatnonzero(weights > 0)
+    if most_vertices is not None and len(used) > most_vertices:
+        used = used[np.linspace(0, len(used) - 1, most_vertices).round().astype(int)]
+    if len(used) == world.shape[1]:
+        return baselines.align_frames(world, target, method, weights, **options)
+    return baselines.align_frames(world[:, used], target[used], method, None if weights is None else weights[used], **options)
 
 
 def _estimate_rest(world: np.ndarray, rot: np.ndarray, trans: np.ndarray, width: float, block: int = 512) -> np.ndarray:
