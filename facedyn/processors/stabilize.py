@@ -215,7 +215,7 @@ def _whole_take_model(reader, params, weights, rest, three_point, schedule):
     """
     from facedyn.geometry import rigid
     from facedyn.stabilize import rest as rest_estimate
-    from facedyn.stabilize.api import INIT_ICP_ITERATIONS, align_weighted
+    from facedyn.stabilize.api import INIT_ICP_ITERATIONS, INIT_VERTICES, align_weighted
     from facedyn.stabilize.rigidity import SAMPLE_FRAMES, estimate_rigidity
 
     count = reader.frame_count
@@ -227,7 +227,7 @@ def _whole_take_model(reader, params, weights, rest, three_point, schedule):
         return model.weights, model.rest
     sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count)).world_points())
     rot, trans = align_weighted(sample, sample[0].astype(np.float64), params["init"], weights, three_point,
-                                icp_iterations=INIT_ICP_ITERATIONS)
+                                icp_iterations=INIT_ICP_ITERATIONS, most_vertices=INIT_VERTICES)
     return weights, rest_estimate.estimate_rest(rigid.apply(rot, trans, sample.astype(np.float64)), schedule.widths_pos[-1])
 
 

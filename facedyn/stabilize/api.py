@@ -161,13 +161,15 @@ def stabilize(
     active = np.arange(n) if weights is None else np.flatnonzero(weights > 0)
     target = rest if rest is not None else world[reference_frame].astype(np.float64)
 
-    t0 = time.perf_counter()
-    if method == "mode-pursuit":
+    def initial_alignment(target):
         # an initialization only: the spline fit and the first (widest) stage absorb what
         # further reweighting would refine
-        iterations = INIT_ICP_ITERATIONS
-        rot, trans = align_weighted(world, target, init, weights, three_point, icp_iterations=iterations,
-                                    most_vertices=INIT_VERTICES)
+        return align_weighted(world, target, init, weights, three_point, icp_iterations=INIT_ICP_ITERATIONS,
+                              most_vertices=INIT_VERTICES)
+
+    t0 = time.perf_counter()
+    if method == "mode-pursuit":
+        rot, trans = initial_alignment(target)
     else:
         rot, trans = align_weighted(world, target, method, weights, three_point)
     timings["init"] = time.perf_counter() - t0
@@ -181,6 +183,7 @@ def stabilize(
     if rest is None:
         t0 = time.perf_counter()
         rest = _estimate_rest(world, rot, trans, schedule.widths_pos[-1])
+        rot, trans = initial_alignment(rest)  # as each chunk of a streamed take starts: aligned to the rest
         timings["init"] += time.perf_counter() - t0
     if schedule.knot_spacing is None:
         t0 = time.perf_counter()
