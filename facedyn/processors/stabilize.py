@@ -163,6 +163,7 @@ class _ChunkedSolve:
                 world, reader.fps, method=params["method"], solver=params["solver"], rest=rest, weights=weights,
                 prior=self.prior, init=params["init"], three_point=self.three_point, schedule=self.schedule, backend=params["backend"],
                 chunk_frames=max(stop - start, 4), chunk_overlap=0, first_frame=start,  # one chunk: this one
+                transforms_only=True,  # the points once blended (below)
             )
             first, skull_to_world = blend.add(k, dualquat.from_translate_orient(result.translate, result.orient))
             rows = slice(first - start, first - start + len(skull_to_world))

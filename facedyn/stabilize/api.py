@@ -34,9 +34,9 @@ INIT_VERTICES = 1024  # vertices the initial ICP fits on, at most: as accurate a
 class StabilizeResult:
     translate: np.ndarray  # (F, 3) skull -> world
     orient: np.ndarray  # (F, 4) wxyz, skull -> world
-    skull_points: np.ndarray  # (F, N, 3) float32, T(t)^-1 world
+    skull_points: np.ndarray | None  # (F, N, 3) float32, T(t)^-1 world (None: asked for transforms only)
     rest: np.ndarray  # (N, 3) rest mesh in skull space
-    solve_error: np.ndarray  # (F,) float32: median distance (cm) of active vertices to rest
+    solve_error: np.ndarray | None  # (F,) float32: median distance (cm) of active vertices to rest (None: as above)
     method: str
     solver: str | None = None
     backend: str | None = None  # the fast solver's energy backend: "numpy" or "opencl"
@@ -99,6 +99,7 @@ def stabilize(
     chunk_overlap: int = 128,
     reference_frame: int = 0,
     first_frame: int = 0,
+    transforms_only: bool = False,
 ) -> StabilizeResult:
     """Solve the rigid skull motion of a tracked face mesh.
 
@@ -128,6 +129,8 @@ def stabilize(
     overlapping chunks with bounded memory, blended in the overlaps.
     first_frame: where world_points start in a longer take (a streamed chunk of it):
     the spline's knots lie on the take's grid (Schedule.coarse_knots).
+    transforms_only: leave out skull_points and solve_error (a streamed chunk's are made
+    once its transforms are blended with the next chunk's).
     """
     t_total = time.perf_counter()
     if method not in METHODS:
@@ -175,7 +178,7 @@ def stabilize(
     timings["init"] = time.perf_counter() - t0
     if method != "mode-pursuit":
         world_to_skull = dualquat.from_translate_orient(trans, quaternion.from_matrix(rot))
-        result = finish(captured, world_to_skull, target, active, method, None, timings)
+        result = finish(captured, world_to_skull, target, active, method, None, timings, not transforms_only)
         result.tracked = tracked
         result.timings["total"] = time.perf_counter() - t_total
         return result
@@ -211,7 +214,7 @@ def stabilize(
         first_frame,
     )
     timings.update(out.timings)
-    result = finish(captured, out.world_to_skull, rest, active, method, solver, timings)
+    result = finish(captured, out.world_to_skull, rest, active, method, solver, timings, not transforms_only)
     final_weights = np.ones(n) if weights is None else weights
     spread = model.spread if model is not None else np.zeros(n)
     result.model = RigidModel(final_weights, rest, spread, model.noise_cm if model is not None else 0.0)
@@ -248,9 +251,16 @@ def _estimate_rest(world: np.ndarray, rot: np.ndarray, trans: np.ndarray, width:
     return rest
 
 
-def finish(world, world_to_skull, rest, active, method, solver, timings) -> StabilizeResult:
-    """Skull transforms, skull-space points, rest and per-frame error from world-to-skull maps."""
+def finish(world, world_to_skull, rest, active, method, solver, timings, points: bool = True) -> StabilizeResult:
+    """Skull transforms, skull-space points, rest and per-frame error from world-to-skull maps (transforms and rest
+    only, without points)."""
     t0 = time.perf_counter()
+    skull_to_world = dualquat.conjugate(world_to_skull)
+    translate, orient = dualquat.to_translate_orient(skull_to_world)
+    rest = np.asarray(rest, dtype=np.float64)
+    if not points:
+        timings["output"] = time.perf_counter() - t0
+        return StabilizeResult(translate, orient, None, rest, None, method, solver, timings=timings)
     frames, n, _ = world.shape
     rot, trans = dualquat.to_rotation_translation(world_to_skull)
     skull = np.empty((frames, n, 3), dtype=np.float32)
@@ -262,8 +272,5 @@ def finish(world, world_to_skull, rest, active, method, solver, timings) -> Stab
         sl = slice(start, start + 1024)
         d = skull[sl][:, active] - rest[active].astype(np.float32)
         error[sl] = np.sqrt(np.median(np.einsum("fni,fni->fn", d, d), axis=1))
-    skull_to_world = dualquat.conjugate(world_to_skull)
-    translate, orient = dualquat.to_translate_orient(skull_to_world)
     timings["output"] = time.perf_counter() - t0
-    rest = np.asarray(rest, dtype=np.float64)
     return StabilizeResult(translate, orient, skull, rest, error, method, solver, timings=timings)
