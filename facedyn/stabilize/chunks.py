@@ -1,8 +1,9 @@
 """Overlapping frame chunks for long takes, and the weights that blend their overlaps.
 
 Mode pursuit's cost and memory grow with frames x vertices; a 100,000-frame take is
-solved as overlapping chunks, each with its own spline. In an overlap the two solutions
-are blended with a linear ramp (dual-quaternion blending, so the result stays rigid).
+solved as overlapping chunks, each with its own spline (knotted on the take's grid). In
+an overlap the two solutions are blended with a linear ramp (dual-quaternion blending,
+so the result stays rigid).
 """
 from __future__ import annotations
 

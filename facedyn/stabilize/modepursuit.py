@@ -6,8 +6,9 @@ on either side, so this is the same family of motions as in world units, but rot
 and translation parameters get comparable scales, which L-BFGS needs in few iterations.
 
 Long takes are cut into overlapping chunks (facedyn.stabilize.chunks), each solved on
-its own with its own spline through every stage, and their transforms are blended in
-the overlaps; memory is bounded by one chunk's arrays.
+its own with its own spline through every stage (knotted on the take's one grid, so that
+a chunk's spline space is the whole take's away from its ends), and their transforms are
+blended in the overlaps; memory is bounded by one chunk's arrays.
 """
 from __future__ import annotations
 
