@@ -252,8 +252,8 @@ def _estimate_rest(world: np.ndarray, rot: np.ndarray, trans: np.ndarray, width:
 
 
 def finish(world, world_to_skull, rest, active, method, solver, timings, points: bool = True) -> StabilizeResult:
-    """Skull transforms, skull-space points, rest and per-frame error from world-to-skull maps (transforms and rest
-    only, without points)."""
+    """Skull transforms, skull-space points, rest and per-frame error from world-to-skull maps (with points=False:
+    the transforms and rest only)."""
     t0 = time.perf_counter()
     skull_to_world = dualquat.conjugate(world_to_skull)
     translate, orient = dualquat.to_translate_orient(skull_to_world)
