@@ -174,8 +174,14 @@ class Performance:
     def world_points(self) -> np.ndarray:
         """The skin in world space, T(t) applied to the skull-space points."""
         t, q = self.skull()
-        rot = quaternion.to_matrix(q)
-        return (np.einsum("fij,fnj->fni", rot, self.points.astype(np.float64)) + t[:, None, :]).astype(np.float32)
+        if not t.any() and np.all(q == (1.0, 0.0, 0.0, 0.0)):  # a capture's static skull: world is skull space
+            return self.points.astype(np.float32)
+        rot_t = np.swapaxes(quaternion.to_matrix(q), 1, 2)
+        world = np.empty(self.points.shape, dtype=np.float32)
+        for a in range(0, self.frame_count, 1024):  # in float64, a block at a time (matmul: BLAS, unlike einsum)
+            b = a + 1024
+            world[a:b] = np.matmul(self.points[a:b].astype(np.float64), rot_t[a:b]) + t[a:b, None, :]
+        return world
 
     def with_changes(self, **changes) -> "Performance":
         return replace(self, **changes)

@@ -162,7 +162,8 @@ class _ChunkedSolve:
             result = stabilize(
                 world, reader.fps, method=params["method"], solver=params["solver"], rest=rest, weights=weights,
                 prior=self.prior, init=params["init"], three_point=self.three_point, schedule=self.schedule, backend=params["backend"],
-                chunk_frames=max(stop - start, 4), chunk_overlap=0,  # one chunk: this one
+                chunk_frames=max(stop - start, 4), chunk_overlap=0, first_frame=start,  # one chunk: this one
+                transforms_only=True,  # the points once blended (below)
             )
             first, skull_to_world = blend.add(k, dualquat.from_translate_orient(result.translate, result.orient))
             rows = slice(first - start, first - start + len(skull_to_world))
@@ -214,9 +215,8 @@ def _whole_take_model(reader, params, weights, rest, three_point, schedule):
     aligned frames, or for the per-frame baselines the first frame.
     """
     from facedyn.geometry import rigid
-    from facedyn.stabilize import baselines
     from facedyn.stabilize import rest as rest_estimate
-    from facedyn.stabilize.api import INIT_ICP_ITERATIONS
+    from facedyn.stabilize.api import INIT_ICP_ITERATIONS, INIT_VERTICES, align_weighted
     from facedyn.stabilize.rigidity import SAMPLE_FRAMES, estimate_rigidity
 
     count = reader.frame_count
@@ -227,8 +227,8 @@ def _whole_take_model(reader, params, weights, rest, three_point, schedule):
         model = estimate_rigidity(sample)
         return model.weights, model.rest
     sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count)).world_points())
-    rot, trans = baselines.align_frames(sample, sample[0].astype(np.float64), params["init"], weights, three_point,
-                                        icp_iterations=INIT_ICP_ITERATIONS)
+    rot, trans = align_weighted(sample, sample[0].astype(np.float64), params["init"], weights, three_point,
+                                icp_iterations=INIT_ICP_ITERATIONS, most_vertices=INIT_VERTICES)
     return weights, rest_estimate.estimate_rest(rigid.apply(rot, trans, sample.astype(np.float64)), schedule.widths_pos[-1])
 
 

@@ -27,15 +27,16 @@ from facedyn.stabilize.schedule import Schedule
 METHODS = ("three-point", "procrustes", "icp", "mode-pursuit")
 SOLVERS = ("fast", "reference")
 INIT_ICP_ITERATIONS = 5
+INIT_VERTICES = 1024  # vertices the initial ICP fits on, at most: as accurate as all 2,590 of a face's rigid region
 
 
 @dataclass
 class StabilizeResult:
     translate: np.ndarray  # (F, 3) skull -> world
     orient: np.ndarray  # (F, 4) wxyz, skull -> world
-    skull_points: np.ndarray  # (F, N, 3) float32, T(t)^-1 world
+    skull_points: np.ndarray | None  # (F, N, 3) float32, T(t)^-1 world (None: asked for transforms only)
     rest: np.ndarray  # (N, 3) rest mesh in skull space
-    solve_error: np.ndarray  # (F,) float32: median distance (cm) of active vertices to rest
+    solve_error: np.ndarray | None  # (F,) float32: median distance (cm) of active vertices to rest (None: as above)
     method: str
     solver: str | None = None
     backend: str | None = None  # the fast solver's energy backend: "numpy" or "opencl"
@@ -97,6 +98,8 @@ def stabilize(
     chunk_frames: int = 4096,
     chunk_overlap: int = 128,
     reference_frame: int = 0,
+    first_frame: int = 0,
+    transforms_only: bool = False,
 ) -> StabilizeResult:
     """Solve the rigid skull motion of a tracked face mesh.
 
@@ -124,6 +127,10 @@ def stabilize(
     the paper's full continuation ``Schedule()`` otherwise.
     chunk_frames, chunk_overlap: takes longer than chunk_frames are solved in
     overlapping chunks with bounded memory, blended in the overlaps.
+    first_frame: where world_points start in a longer take (a streamed chunk of it):
+    the spline's knots lie on the take's grid (Schedule.coarse_knots).
+    transforms_only: leave out skull_points and solve_error (a streamed chunk's are made
+    once its transforms are blended with the next chunk's).
     """
     t_total = time.perf_counter()
     if method not in METHODS:
@@ -157,18 +164,21 @@ def stabilize(
     active = np.arange(n) if weights is None else np.flatnonzero(weights > 0)
     target = rest if rest is not None else world[reference_frame].astype(np.float64)
 
-    t0 = time.perf_counter()
-    if method == "mode-pursuit":
+    def initial_alignment(target):
         # an initialization only: the spline fit and the first (widest) stage absorb what
         # further reweighting would refine
-        iterations = INIT_ICP_ITERATIONS
-        rot, trans = baselines.align_frames(world, target, init, weights, three_point, icp_iterations=iterations)
+        return align_weighted(world, target, init, weights, three_point, icp_iterations=INIT_ICP_ITERATIONS,
+                              most_vertices=INIT_VERTICES)
+
+    t0 = time.perf_counter()
+    if method == "mode-pursuit":
+        rot, trans = initial_alignment(target)
     else:
-        rot, trans = baselines.align_frames(world, target, method, weights, three_point)
+        rot, trans = align_weighted(world, target, method, weights, three_point)
     timings["init"] = time.perf_counter() - t0
     if method != "mode-pursuit":
         world_to_skull = dualquat.from_translate_orient(trans, quaternion.from_matrix(rot))
-        result = finish(captured, world_to_skull, target, active, method, None, timings)
+        result = finish(captured, world_to_skull, target, active, method, None, timings, not transforms_only)
         result.tracked = tracked
         result.timings["total"] = time.perf_counter() - t_total
         return result
@@ -176,6 +186,7 @@ def stabilize(
     if rest is None:
         t0 = time.perf_counter()
         rest = _estimate_rest(world, rot, trans, schedule.widths_pos[-1])
+        rot, trans = initial_alignment(rest)  # as each chunk of a streamed take starts: aligned to the rest
         timings["init"] += time.perf_counter() - t0
     if schedule.knot_spacing is None:
         t0 = time.perf_counter()
@@ -200,9 +211,10 @@ def stabilize(
         stage_solver,
         chunk_frames,
         chunk_overlap,
+        first_frame,
     )
     timings.update(out.timings)
-    result = finish(captured, out.world_to_skull, rest, active, method, solver, timings)
+    result = finish(captured, out.world_to_skull, rest, active, method, solver, timings, not transforms_only)
     final_weights = np.ones(n) if weights is None else weights
     spread = model.spread if model is not None else np.zeros(n)
     result.model = RigidModel(final_weights, rest, spread, model.noise_cm if model is not None else 0.0)
@@ -215,6 +227,20 @@ def stabilize(
     return result
 
 
+def align_weighted(world, target, method, weights, three_point=None, most_vertices=None, **options):
+    """baselines.align_frames, fitting Procrustes and ICP on the vertices of positive weight only: the others add
+    nothing to the fit but would cost as much as the rigid region (a third of a face mesh or more). most_vertices:
+    fit on at most that many of them, evenly strided (an initialization need not see every vertex)."""
+    if method not in ("procrustes", "icp"):
+        return baselines.align_frames(world, target, method, weights, three_point, **options)
+    used = np.arange(world.shape[1]) if weights is None else np.flatnonzero(weights > 0)
+    if most_vertices is not None and len(used) > most_vertices:
+        used = used[np.linspace(0, len(used) - 1, most_vertices).round().astype(int)]
+    if len(used) == world.shape[1]:
+        return baselines.align_frames(world, target, method, weights, **options)
+    return baselines.align_frames(world[:, used], target[used], method, None if weights is None else weights[used], **options)
+
+
 def _estimate_rest(world: np.ndarray, rot: np.ndarray, trans: np.ndarray, width: float, block: int = 512) -> np.ndarray:
     """The rest mesh from initially aligned frames (sampled), a block of vertices at a time."""
     sample = rest_estimate.sample_frames(len(world))
@@ -225,9 +251,16 @@ def _estimate_rest(world: np.ndarray, rot: np.ndarray, trans: np.ndarray, width:
     return rest
 
 
-def finish(world, world_to_skull, rest, active, method, solver, timings) -> StabilizeResult:
-    """Skull transforms, skull-space points, rest and per-frame error from world-to-skull maps."""
+def finish(world, world_to_skull, rest, active, method, solver, timings, points: bool = True) -> StabilizeResult:
+    """Skull transforms, skull-space points, rest and per-frame error from world-to-skull maps (with points=False:
+    the transforms and rest only)."""
     t0 = time.perf_counter()
+    skull_to_world = dualquat.conjugate(world_to_skull)
+    translate, orient = dualquat.to_translate_orient(skull_to_world)
+    rest = np.asarray(rest, dtype=np.float64)
+    if not points:
+        timings["output"] = time.perf_counter() - t0
+        return StabilizeResult(translate, orient, None, rest, None, method, solver, timings=timings)
     frames, n, _ = world.shape
     rot, trans = dualquat.to_rotation_translation(world_to_skull)
     skull = np.empty((frames, n, 3), dtype=np.float32)
@@ -239,8 +272,5 @@ def finish(world, world_to_skull, rest, active, method, solver, timings) -> Stab
         sl = slice(start, start + 1024)
         d = skull[sl][:, active] - rest[active].astype(np.float32)
         error[sl] = np.sqrt(np.median(np.einsum("fni,fni->fn", d, d), axis=1))
-    skull_to_world = dualquat.conjugate(world_to_skull)
-    translate, orient = dualquat.to_translate_orient(skull_to_world)
     timings["output"] = time.perf_counter() - t0
-    rest = np.asarray(rest, dtype=np.float64)
     return StabilizeResult(translate, orient, skull, rest, error, method, solver, timings=timings)

@@ -1,8 +1,9 @@
 """Overlapping frame chunks for long takes, and the weights that blend their overlaps.
 
 Mode pursuit's cost and memory grow with frames x vertices; a 100,000-frame take is
-solved as overlapping chunks, each with its own spline. In an overlap the two solutions
-are blended with a linear ramp (dual-quaternion blending, so the result stays rigid).
+solved as overlapping chunks, each with its own spline (knotted on the take's grid). In
+an overlap the two solutions are blended with a linear ramp (dual-quaternion blending,
+so the result stays rigid).
 """
 from __future__ import annotations
 
@@ -14,7 +15,12 @@ from facedyn.geometry import dualquat
 
 
 def chunk_ranges(frames: int, chunk_frames: int, overlap: int) -> list[tuple[int, int]]:
-    """Equal chunks [start, stop) covering 0..frames, consecutive ones sharing >= overlap frames."""
+    """Equal chunks [start, stop) covering 0..frames, consecutive ones sharing >= overlap frames.
+
+    As few chunks of at most chunk_frames as cover the take, each only as long as that
+    needs, so that the frames solved twice are about the overlaps and no more (chunks of
+    chunk_frames each would solve 10,000 frames as 12,288).
+    """
     if frames < 1:
         raise ValueError(f"need at least one frame, got {frames}")
     if overlap < 0 or chunk_frames < 4 * max(overlap, 1):
@@ -22,8 +28,10 @@ def chunk_ranges(frames: int, chunk_frames: int, overlap: int) -> list[tuple[int
     if frames <= chunk_frames:
         return [(0, frames)]
     count = math.ceil((frames - overlap) / (chunk_frames - overlap))
-    starts = np.round(np.linspace(0, frames - chunk_frames, count)).astype(int)
-    return [(int(s), int(s) + chunk_frames) for s in starts]
+    size = math.ceil((frames + (count - 1) * overlap) / count)  # <= chunk_frames
+    # starts k (frames - size) / (count - 1), rounded down: consecutive ones at most size - overlap apart
+    starts = [k * (frames - size) // (count - 1) for k in range(count)]
+    return [(start, start + size) for start in starts]
 
 
 def blend_weights(ranges: list[tuple[int, int]], ramp: int) -> list[np.ndarray]:

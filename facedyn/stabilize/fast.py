@@ -26,6 +26,7 @@ class FastSolver:
     the two on this machine (facedyn.kernels.runtime.choose_backend), NumPy without a device."""
 
     name = "fast"
+    energy_is_numpy = True  # its energies are NumpyEnergy's (OpenCL's kernels are its tested twin): no re-evaluation
 
     def __init__(self, backend: str = "auto"):
         if backend not in runtime.BACKENDS:

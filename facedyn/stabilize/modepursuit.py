@@ -6,8 +6,9 @@ on either side, so this is the same family of motions as in world units, but rot
 and translation parameters get comparable scales, which L-BFGS needs in few iterations.
 
 Long takes are cut into overlapping chunks (facedyn.stabilize.chunks), each solved on
-its own with its own spline through every stage, and their transforms are blended in
-the overlaps; memory is bounded by one chunk's arrays.
+its own with its own spline through every stage (knotted on the take's one grid, so that
+a chunk's spline space is the whole take's away from its ends), and their transforms are
+blended in the overlaps; memory is bounded by one chunk's arrays.
 """
 from __future__ import annotations
 
@@ -83,12 +84,14 @@ def mode_pursuit(
     solver,
     chunk_frames: int,
     chunk_overlap: int,
+    first_frame: int = 0,
 ) -> ModePursuitOutput:
     """Solve world-to-skull transforms for world (F, N, 3) from initial per-frame maps.
 
     active: vertex indices in the energy; weights: their weights (None: all 1); rest:
     (Na, 3) rest of the active vertices in skull space; init_rot, init_trans: per-frame
-    world-to-skull maps that the first spline is fitted to.
+    world-to-skull maps that the first spline is fitted to; first_frame: where world
+    starts in its take (a chunk of a streamed take), which places the spline's knots.
     """
     timings = {"prepare": 0.0, "solve": 0.0, "energy": 0.0}
     rest = np.asarray(rest, dtype=np.float64)
@@ -109,8 +112,8 @@ def mode_pursuit(
         center = world[start:stop, active].mean(axis=(0, 1), dtype=np.float64)
         points = units.points(world[start:stop, active], center)
         velocity = derivative_operator(frames, fps)
-        knots = bspline.clamped_uniform_knots(schedule.coarse_spans(frames, fps), 0.0, max(frames - 1, 1))
-        x = np.arange(frames, dtype=np.float64)
+        knots = schedule.coarse_knots(first_frame + start, frames, fps)
+        x = np.arange(first_frame + start, first_frame + stop, dtype=np.float64)
         initial = units.to_problem(init_rot[start:stop], init_trans[start:stop], center)
         controls = sdlb.fit_controls(bspline.basis(knots, x), initial)
         evaluator = solver.bind(points, units.rest(rest), velocity, weights)
@@ -131,11 +134,14 @@ def mode_pursuit(
         t0 = time.perf_counter()
         del evaluator  # one chunk's buffers at a time
         dq = sdlb.blend(basis, controls)
-        motion = dualquat.to_rotation_translation(dq)
-        common = NumpyEnergy(points, units.rest(rest), velocity, weights)  # the same yardstick for every solver
-        common.rebase(*motion)
-        e_pos, e_vel, _, _ = common(*motion, wp, wv, gradient=False)
-        energy += e_pos + e_vel
+        if getattr(solver, "energy_is_numpy", False):
+            energy += value  # the last stage's final value is already the yardstick's
+        else:
+            motion = dualquat.to_rotation_translation(dq)
+            common = NumpyEnergy(points, units.rest(rest), velocity, weights)  # the same yardstick for every solver
+            common.rebase(*motion)
+            e_pos, e_vel, _, _ = common(*motion, wp, wv, gradient=False)
+            energy += e_pos + e_vel
         timings["energy"] += time.perf_counter() - t0
         dq = units.to_world(dq, center)
         current = total[start:stop]

@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 REFERENCE_FPS = 120.0
 
 
@@ -77,7 +79,16 @@ class Schedule:
             for k, (wp, wv) in enumerate(zip(self.widths_pos, self.widths_vel))
         ]
 
-    def coarse_spans(self, frames: int, fps: float) -> int:
-        """Spans of the first stage's spline over frames 0..frames-1."""
+    def coarse_knots(self, first: int, frames: int, fps: float) -> np.ndarray:
+        """Knots of the first stage's cubic spline over frames first..first+frames-1 of a take.
+
+        Its inner knots lie on one grid for the whole take (every knot spacing x
+        2^refinements from frame 0), clamped at the ends, so that a chunk of a long take
+        is fitted in the same spline space as the whole take away from its ends, and its
+        solve matches the whole take's where the chunks are blended.
+        """
         coarse_frames = self.knot_spacing * fps * 2**self.refinements
-        return max(1, math.ceil((frames - 1) / coarse_frames))
+        last = first + max(frames - 1, 1)
+        grid = np.arange(math.floor(first / coarse_frames) + 1, math.ceil(last / coarse_frames)) * coarse_frames
+        inner = grid[(grid > first + 1e-9) & (grid < last - 1e-9)]
+        return np.concatenate([np.full(4, float(first)), inner, np.full(4, float(last))])

@@ -17,6 +17,7 @@ from pxr import Usd, UsdGeom
 from facedyn.performance import UVs, Performance, Topology, roles
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
+from facedyn.usd.layers import frame_extents
 from facedyn.usd.layerstack import LEGACY_PROCESSOR_ROLES, is_take_root, layer_metadata, role_of
 from facedyn.usd.runs import IN_MEMORY, LayerInput, current_run
 from facedyn.usd.stage import get_prim, layer_name, open_stage
@@ -318,12 +319,13 @@ MIN_EXTENT_CM = 1e-4  # a frame whose points all coincide (to 1 µm) has no shap
 def ensure_plausible_points(points: np.ndarray, time_codes: np.ndarray, where: str) -> None:
     """Finite, and frames that are a shape in centimetres: not collapsed to a point, not astronomically far."""
     ensure_finite(points, time_codes, where)
-    far = np.abs(points).max(axis=(1, 2)) > MAX_COORDINATE_CM
+    bounds = frame_extents(points)  # (F, 2, 3) per-frame lows and highs: one fast pass per coordinate
+    far = np.abs(bounds).max(axis=(1, 2)) > MAX_COORDINATE_CM
     if far.any():
         bad = int(np.argmax(far))
         raise TakeError(f"{where}: coordinates beyond {MAX_COORDINATE_CM:g} cm at time {time_codes[bad]:g}; "
                         "check the source's units (metersPerUnit, or import --units for OBJ)")
-    extent = (points.max(axis=1) - points.min(axis=1)).max(axis=1)
+    extent = (bounds[:, 1] - bounds[:, 0]).max(axis=1)
     flat = extent < MIN_EXTENT_CM
     if flat.any():
         bad = int(np.argmax(flat))
