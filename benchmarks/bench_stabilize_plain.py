@@ -123,7 +123,8 @@ def run_plain_cases(rig, data: Path) -> None:
                 "fps": take.fps, "frames": len(points), "dropped_frames": take.dropped,
                 "oracle": floor, "masked_readme": take.errors(rig, masked.translate, masked.orient),
                 "cli": take.cli, "cli_import_and_stabilize_seconds": take.cli_seconds,
-                "api_default": take.errors(rig, default.translate, default.orient), "actor": take.errors(rig, with_actor.translate, with_actor.orient),
+                "api_default": take.errors(rig, default.translate, default.orient), "smoothing_hz": default.smoothing_hz,
+                "actor": take.errors(rig, with_actor.translate, with_actor.orient),
                 "actor_takes": len(others),
             }
             record["cli_meets_targets"] = meets_targets(record["cli"], floor)
