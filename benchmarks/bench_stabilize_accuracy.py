@@ -59,7 +59,7 @@ def main() -> None:
     if args.plain:
         from bench_stabilize_plain import run_plain_cases
 
-        run_plain_cases(rig, DATA)
+        run_plain_cases(rig, DATA, short=args.rig is not None)
         return
     weights = rig.rigid_weights.astype(np.float64)
     three = tuple(rig.landmarks[k] for k in ("eye_corner_left", "eye_corner_right", "nose_base"))

@@ -145,6 +145,7 @@ class _ChunkedSolve:
         self.backend = None
         self.rigid_vertices: int | None = None  # vertices the last chunk found rigid
         self.knot_spacing: float | None = None
+        self.smoothing_hz: float | None = None  # the motion's smoothing cut-off (the last chunk's)
 
     def pieces(self, progress: Progress):
         from facedyn.geometry import dualquat
@@ -188,6 +189,7 @@ class _ChunkedSolve:
         if result.model is not None:
             self.rigid_vertices = int(np.count_nonzero(result.model.weights >= 0.99))
         self.knot_spacing = result.knot_spacing
+        self.smoothing_hz = result.smoothing_hz
 
     def summary(self) -> dict:
         summary = {
@@ -204,6 +206,8 @@ class _ChunkedSolve:
             summary["rigid_vertices"] = self.rigid_vertices
         if self.knot_spacing is not None:
             summary["knot_spacing_s"] = round(self.knot_spacing, 5)
+        if self.smoothing_hz is not None:
+            summary["smoothing_hz"] = self.smoothing_hz
         return summary
 
 

@@ -19,10 +19,10 @@ from facedyn.stabilize import baselines
 from facedyn.stabilize import rest as rest_estimate
 from facedyn.stabilize.dropped import bridge_dropped, tracked_frames
 from facedyn.stabilize.fast import FastSolver
-from facedyn.stabilize.knots import choose_knot_spacing
 from facedyn.stabilize.modepursuit import StageRecord, mode_pursuit
 from facedyn.stabilize.rigidity import RigidModel, estimate_rigidity
 from facedyn.stabilize.schedule import Schedule
+from facedyn.stabilize.smoothing import smooth_skull_motion
 
 METHODS = ("three-point", "procrustes", "icp", "mode-pursuit")
 SOLVERS = ("fast", "reference")
@@ -46,6 +46,7 @@ class StabilizeResult:
     model: RigidModel | None = None  # mode pursuit: the weights and rest it solved with (an actor's prior)
     tracked: np.ndarray | None = None  # (F,) bool: False on dropped frames (bridged, facedyn.stabilize.dropped)
     knot_spacing: float | None = None  # mode pursuit: seconds between the final spline's knots
+    smoothing_hz: float | None = None  # mode pursuit: the cut-off of the motion's smoothing (facedyn.stabilize.smoothing)
 
 
 def _check_inputs(world, fps, rest, weights):
@@ -124,7 +125,9 @@ def stabilize(
     three_point: vertex indices for three-point alignment (method or init).
     schedule: widths, iterations per stage, spline levels (facedyn.stabilize.schedule);
     None: ``Schedule.locked()`` when the weights were discovered or came with a prior,
-    the paper's full continuation ``Schedule()`` otherwise.
+    the paper's full continuation ``Schedule()`` otherwise. A schedule with no knot
+    spacing (``Schedule.locked()``) gets a knot per frame, and the solved motion is then
+    smoothed with a cut-off chosen for the take (facedyn.stabilize.smoothing).
     chunk_frames, chunk_overlap: takes longer than chunk_frames are solved in
     overlapping chunks with bounded memory, blended in the overlaps.
     first_frame: where world_points start in a longer take (a streamed chunk of it):
@@ -188,10 +191,9 @@ def stabilize(
         rest = _estimate_rest(world, rot, trans, schedule.widths_pos[-1])
         rot, trans = initial_alignment(rest)  # as each chunk of a streamed take starts: aligned to the rest
         timings["init"] += time.perf_counter() - t0
-    if schedule.knot_spacing is None:
-        t0 = time.perf_counter()
-        schedule = replace(schedule, knot_spacing=choose_knot_spacing(rot, trans, fps, rest[active]))
-        timings["knots"] = time.perf_counter() - t0
+    smooth_per_take = schedule.knot_spacing is None  # a knot per frame, then the take's smoothness prior
+    if smooth_per_take:
+        schedule = replace(schedule, knot_spacing=1.0 / fps)
     if solver == "fast":
         stage_solver = FastSolver(backend)
     else:
@@ -214,13 +216,19 @@ def stabilize(
         first_frame,
     )
     timings.update(out.timings)
-    result = finish(captured, out.world_to_skull, rest, active, method, solver, timings, not transforms_only)
+    world_to_skull, cutoff = out.world_to_skull, None
+    if smooth_per_take:
+        t0 = time.perf_counter()
+        world_to_skull, cutoff = smooth_skull_motion(world_to_skull, fps, rest[active], tracked)
+        timings["smoothing"] = time.perf_counter() - t0
+    result = finish(captured, world_to_skull, rest, active, method, solver, timings, not transforms_only)
     final_weights = np.ones(n) if weights is None else weights
     spread = model.spread if model is not None else np.zeros(n)
     result.model = RigidModel(final_weights, rest, spread, model.noise_cm if model is not None else 0.0)
     result.tracked = tracked
     result.energy = out.energy
     result.knot_spacing = schedule.knot_spacing
+    result.smoothing_hz = cutoff
     result.backend = getattr(stage_solver, "used_backend", None)
     result.history = out.history
     result.timings["total"] = time.perf_counter() - t_total
