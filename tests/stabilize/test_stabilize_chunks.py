@@ -1,3 +1,5 @@
+import math
+
 import numpy as np
 import pytest
 
@@ -19,9 +21,11 @@ def test_chunks_cover_overlap_and_blend_to_one(frames):
     np.testing.assert_allclose(total, 1.0)
 
 
-def test_chunks_are_no_longer_than_covering_the_take_needs():
-    ranges = chunk_ranges(10_000, 4096, 128)
-    assert len(ranges) == 3 and sum(b - a for a, b in ranges) <= 10_000 + 2 * 128 + len(ranges)
+@pytest.mark.parametrize("frames", [4097, 10_000, 50_000, 144_000])
+def test_chunks_are_few_and_of_one_length_whatever_the_take(frames):
+    ranges = chunk_ranges(frames, 4096, 128)
+    assert len(ranges) == math.ceil((frames - 128) / (4096 - 128))
+    assert {b - a for a, b in ranges} == {4096}
 
 
 def test_bad_chunking_raises():
