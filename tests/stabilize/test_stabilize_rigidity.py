@@ -154,3 +154,27 @@ def test_an_actors_neutral_as_prior_is_still_checked_for_rigidity_per_take(rig, 
     oracle = errors(rig, take, stabilize(tracked.points, take.fps, method="procrustes", rest=rig.neutral,
                                           weights=(rig.rigid_weights == 1).astype(float)))
     assert errors(rig, take, result)["median_vertex_cm"] <= 1.5 * oracle["median_vertex_cm"]
+
+
+def test_a_priors_noise_floor_is_measured_on_its_bone_so_its_sliding_falloff_is_dropped():
+    """A rig whose bone is a small part of the mesh (the ICT rig: 8 %): a quantile over every vertex would land on soft
+    tissue and keep the prior's falloff ring, skin that slides against the skull, at full weight. Measured on the
+    vertices the prior holds fully rigid, the floor is the tracking noise and the ring is dropped."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(7)
+    frames, fps = 240, 120.0
+    bone, ring, soft = np.arange(0, 40), np.arange(40, 100), np.arange(100, 400)
+    rest = rng.normal(scale=6.0, size=(400, 3))
+    time = np.arange(frames) / fps
+    skull_space = np.repeat(rest[None], frames, axis=0)
+    skull_space[:, ring] += 0.3 * np.sin(2 * np.pi * time)[:, None, None] * np.array([0.0, 1.0, 0.0])  # slides as a block
+    skull_space[:, soft] += rng.normal(scale=0.5, size=(frames, len(soft), 3))
+    turn = Rotation.from_rotvec(0.1 * np.stack([np.sin(3 * time), np.cos(2 * time), np.sin(time)], axis=1))
+    world = np.einsum("fij,fnj->fni", turn.as_matrix(), skull_space) + rng.normal(scale=0.01, size=skull_space.shape)
+    prior_weights = np.zeros(400)
+    prior_weights[bone], prior_weights[ring] = 1.0, 0.5  # a rig's falloff from its bone set
+    model = estimate_rigidity(world, RigidModel.known(rest, prior_weights))
+    assert np.all(model.weights[ring] == 0) and np.all(model.weights[soft] == 0)
+    assert model.weights[bone].mean() > 0.9
+    assert model.noise_cm == pytest.approx(2.5 * 0.01, rel=0.3)  # 90 % of |3D normal| at 0.01 cm
