@@ -178,3 +178,44 @@ def test_a_priors_noise_floor_is_measured_on_its_bone_so_its_sliding_falloff_is_
     assert np.all(model.weights[ring] == 0) and np.all(model.weights[soft] == 0)
     assert model.weights[bone].mean() > 0.9
     assert model.noise_cm == pytest.approx(2.5 * 0.01, rel=0.3)  # 90 % of |3D normal| at 0.01 cm
+
+
+def _head_with_a_block(block_on_springs: bool, fps=120.0, seconds=3.0, seed=11):
+    """A walking head (translation at 0.9 and 1.8 Hz, a nod): 60 bone vertices, a block of 200 that no expression moves
+    (on 8 Hz springs to the bone, or on the bone), 150 soft ones (6 Hz springs and a slow expression). World (F, N, 3)."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    frames, steps = int(seconds * fps), 20
+    t = np.arange(frames * steps) / (fps * steps)
+    translate = np.stack([1.0 * np.sin(2 * np.pi * 0.9 * t), 2.0 * np.sin(2 * np.pi * 1.8 * t), 0 * t], axis=1)
+    nod = Rotation.from_rotvec(np.radians(3.0) * np.sin(2 * np.pi * 1.8 * t + 0.5)[:, None] * [1.0, 0.0, 0.0])
+    acceleration = nod.inv().apply(np.gradient(np.gradient(translate, t, axis=0), t, axis=0))  # in the skull frame
+
+    def lag(hz, damping=0.25):  # tissue on a spring: u'' + 2 zeta w u' + w^2 u = -a
+        w, u, v, out = 2 * np.pi * hz, np.zeros(3), np.zeros(3), np.empty_like(acceleration)
+        for k, a in enumerate(acceleration):
+            v += (-a - 2 * damping * w * v - w * w * u) / (fps * steps)
+            u = u + v / (fps * steps)
+            out[k] = u
+        return out[::steps]
+
+    rest = rng.normal(scale=6.0, size=(410, 3))
+    skull = np.repeat(rest[None], frames, axis=0)
+    if block_on_springs:
+        skull[:, 60:260] += lag(8.0)[:, None]
+    expression = 0.5 * np.sin(2 * np.pi * 0.3 * t[::steps])[:, None, None] * rng.normal(size=(1, 150, 3))
+    skull[:, 260:] += lag(6.0)[:, None] + expression
+    world = nod[::steps].as_matrix() @ skull.transpose(0, 2, 1)
+    return world.transpose(0, 2, 1) + translate[::steps, None] + rng.normal(scale=0.01, size=skull.shape)
+
+
+def test_a_discovered_mode_on_a_sliding_block_leads_the_head_and_is_flagged():
+    """facedyn.stabilize.inertia: a block larger and as still as the bone wins rigidity discovery; in its frame the
+    bone leads (moves with the frame's acceleration), which real soft tissue in the skull's frame never does."""
+    sliding = stabilize(_head_with_a_block(True), 120.0)
+    assert sliding.model.weights[60:260].mean() > 0.9 and sliding.model.weights[:60].max() == 0  # locked on the block
+    assert sliding.inertia.suspect and sliding.inertia.leading > 0.1
+    on_bone = stabilize(_head_with_a_block(False), 120.0)
+    assert on_bone.model.weights[:260].mean() > 0.9
+    assert not on_bone.inertia.suspect and on_bone.inertia.lagging > 0.9
