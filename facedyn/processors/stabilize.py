@@ -146,6 +146,7 @@ class _ChunkedSolve:
         self.rigid_vertices: int | None = None  # vertices the last chunk found rigid
         self.knot_spacing: float | None = None
         self.smoothing_hz: float | None = None  # the motion's smoothing cut-off (the last chunk's)
+        self.inertia = None  # a discovered rigid mode's inertia check (facedyn.stabilize.inertia), the last chunk's
 
     def pieces(self, progress: Progress):
         from facedyn.geometry import dualquat
@@ -190,6 +191,7 @@ class _ChunkedSolve:
             self.rigid_vertices = int(np.count_nonzero(result.model.weights >= 0.99))
         self.knot_spacing = result.knot_spacing
         self.smoothing_hz = result.smoothing_hz
+        self.inertia = result.inertia or self.inertia
 
     def summary(self) -> dict:
         summary = {
@@ -208,6 +210,11 @@ class _ChunkedSolve:
             summary["knot_spacing_s"] = round(self.knot_spacing, 5)
         if self.smoothing_hz is not None:
             summary["smoothing_hz"] = self.smoothing_hz
+        if self.inertia is not None and self.inertia.suspect:
+            summary["warning"] = (
+                f"the rigid mode found leads the head's motion as soft tissue would ({self.inertia.leading:.0%} of the "
+                f"other vertices lead it, {self.inertia.lagging:.0%} lag): it may be skin sliding on the skull; "
+                "stabilize with --actor (an actor made from the rig or a neutral scan)")
         return summary
 
 

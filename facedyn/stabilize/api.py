@@ -19,6 +19,7 @@ from facedyn.stabilize import baselines
 from facedyn.stabilize import rest as rest_estimate
 from facedyn.stabilize.dropped import bridge_dropped, tracked_frames
 from facedyn.stabilize.fast import FastSolver
+from facedyn.stabilize.inertia import InertiaCheck, check_frame
 from facedyn.stabilize.modepursuit import StageRecord, mode_pursuit
 from facedyn.stabilize.rigidity import RigidModel, estimate_rigidity
 from facedyn.stabilize.schedule import Schedule
@@ -47,6 +48,7 @@ class StabilizeResult:
     tracked: np.ndarray | None = None  # (F,) bool: False on dropped frames (bridged, facedyn.stabilize.dropped)
     knot_spacing: float | None = None  # mode pursuit: seconds between the final spline's knots
     smoothing_hz: float | None = None  # mode pursuit: the cut-off of the motion's smoothing (facedyn.stabilize.smoothing)
+    inertia: InertiaCheck | None = None  # discovered weights: whether the frame lags like the skull's (suspect: it leads)
 
 
 def _check_inputs(world, fps, rest, weights):
@@ -225,6 +227,8 @@ def stabilize(
     final_weights = np.ones(n) if weights is None else weights
     spread = model.spread if model is not None else np.zeros(n)
     result.model = RigidModel(final_weights, rest, spread, model.noise_cm if model is not None else 0.0)
+    if model is not None and prior is None:
+        result.inertia = check_frame(world, result.translate, result.orient, rest, np.flatnonzero(weights == 0), fps)
     result.tracked = tracked
     result.energy = out.energy
     result.knot_spacing = schedule.knot_spacing

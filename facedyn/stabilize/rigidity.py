@@ -136,13 +136,27 @@ def estimate_rigidity(
             last = round_ == rounds - 1
             rest = rest_estimate.estimate_rest(aligned, width) if last else rest_estimate.median_rest(aligned)
         spread = np.percentile(np.linalg.norm(aligned - rest, axis=-1), SPREAD_QUANTILE, axis=0)
-        floor = max(float(np.percentile(spread, FLOOR_QUANTILE)), 1e-6)
+        floor = noise_floor(spread, prior)
         weights = rigidity_weights(spread / floor)
         if prior is not None:
             weights = np.minimum(weights, prior.weights)
         if np.count_nonzero(weights) < MIN_RIGID:  # nothing stands out: every vertex counts
             weights = np.ones(n)
     return RigidModel(weights, rest, spread, floor)
+
+
+def noise_floor(spread: np.ndarray, prior: RigidModel | None = None) -> float:
+    """The tracking noise floor (cm): the spread FLOOR_QUANTILE % of the candidate vertices stay below.
+
+    Candidates are every vertex, or with a prior the vertices it holds fully rigid: an
+    actor knows where its bone is, and on a rig whose bone is a small part of the mesh
+    (the ICT rig: 8 %) a quantile over every vertex lands on soft tissue (0.53 cm on a run)
+    and would keep the prior's falloff, skin that slides against the skull, at full weight.
+    """
+    candidates = spread if prior is None else spread[prior.weights >= 1.0]
+    if len(candidates) < MIN_RIGID:
+        candidates = spread
+    return max(float(np.percentile(candidates, FLOOR_QUANTILE)), 1e-6)
 
 
 def rigidity_weights(relative_spread: np.ndarray) -> np.ndarray:

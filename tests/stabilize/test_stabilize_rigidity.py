@@ -154,3 +154,68 @@ def test_an_actors_neutral_as_prior_is_still_checked_for_rigidity_per_take(rig, 
     oracle = errors(rig, take, stabilize(tracked.points, take.fps, method="procrustes", rest=rig.neutral,
                                           weights=(rig.rigid_weights == 1).astype(float)))
     assert errors(rig, take, result)["median_vertex_cm"] <= 1.5 * oracle["median_vertex_cm"]
+
+
+def test_a_priors_noise_floor_is_measured_on_its_bone_so_its_sliding_falloff_is_dropped():
+    """A rig whose bone is a small part of the mesh (the ICT rig: 8 %): a quantile over every vertex would land on soft
+    tissue and keep the prior's falloff ring, skin that slides against the skull, at full weight. Measured on the
+    vertices the prior holds fully rigid, the floor is the tracking noise and the ring is dropped."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(7)
+    frames, fps = 240, 120.0
+    bone, ring, soft = np.arange(0, 40), np.arange(40, 100), np.arange(100, 400)
+    rest = rng.normal(scale=6.0, size=(400, 3))
+    time = np.arange(frames) / fps
+    skull_space = np.repeat(rest[None], frames, axis=0)
+    skull_space[:, ring] += 0.3 * np.sin(2 * np.pi * time)[:, None, None] * np.array([0.0, 1.0, 0.0])  # slides as a block
+    skull_space[:, soft] += rng.normal(scale=0.5, size=(frames, len(soft), 3))
+    turn = Rotation.from_rotvec(0.1 * np.stack([np.sin(3 * time), np.cos(2 * time), np.sin(time)], axis=1))
+    world = np.einsum("fij,fnj->fni", turn.as_matrix(), skull_space) + rng.normal(scale=0.01, size=skull_space.shape)
+    prior_weights = np.zeros(400)
+    prior_weights[bone], prior_weights[ring] = 1.0, 0.5  # a rig's falloff from its bone set
+    model = estimate_rigidity(world, RigidModel.known(rest, prior_weights))
+    assert np.all(model.weights[ring] == 0) and np.all(model.weights[soft] == 0)
+    assert model.weights[bone].mean() > 0.9
+    assert model.noise_cm == pytest.approx(2.5 * 0.01, rel=0.3)  # 90 % of |3D normal| at 0.01 cm
+
+
+def _head_with_a_block(block_on_springs: bool, fps=120.0, seconds=3.0, seed=11):
+    """A walking head (translation at 0.9 and 1.8 Hz, a nod): 60 bone vertices, a block of 200 that no expression moves
+    (on 8 Hz springs to the bone, or on the bone), 150 soft ones (6 Hz springs and a slow expression). World (F, N, 3)."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    frames, steps = int(seconds * fps), 20
+    t = np.arange(frames * steps) / (fps * steps)
+    translate = np.stack([1.0 * np.sin(2 * np.pi * 0.9 * t), 2.0 * np.sin(2 * np.pi * 1.8 * t), 0 * t], axis=1)
+    nod = Rotation.from_rotvec(np.radians(3.0) * np.sin(2 * np.pi * 1.8 * t + 0.5)[:, None] * [1.0, 0.0, 0.0])
+    acceleration = nod.inv().apply(np.gradient(np.gradient(translate, t, axis=0), t, axis=0))  # in the skull frame
+
+    def lag(hz, damping=0.25):  # tissue on a spring: u'' + 2 zeta w u' + w^2 u = -a
+        w, u, v, out = 2 * np.pi * hz, np.zeros(3), np.zeros(3), np.empty_like(acceleration)
+        for k, a in enumerate(acceleration):
+            v += (-a - 2 * damping * w * v - w * w * u) / (fps * steps)
+            u = u + v / (fps * steps)
+            out[k] = u
+        return out[::steps]
+
+    rest = rng.normal(scale=6.0, size=(410, 3))
+    skull = np.repeat(rest[None], frames, axis=0)
+    if block_on_springs:
+        skull[:, 60:260] += lag(8.0)[:, None]
+    expression = 0.5 * np.sin(2 * np.pi * 0.3 * t[::steps])[:, None, None] * rng.normal(size=(1, 150, 3))
+    skull[:, 260:] += lag(6.0)[:, None] + expression
+    world = nod[::steps].as_matrix() @ skull.transpose(0, 2, 1)
+    return world.transpose(0, 2, 1) + translate[::steps, None] + rng.normal(scale=0.01, size=skull.shape)
+
+
+def test_a_discovered_mode_on_a_sliding_block_leads_the_head_and_is_flagged():
+    """facedyn.stabilize.inertia: a block larger and as still as the bone wins rigidity discovery; in its frame the
+    bone leads (moves with the frame's acceleration), which real soft tissue in the skull's frame never does."""
+    sliding = stabilize(_head_with_a_block(True), 120.0)
+    assert sliding.model.weights[60:260].mean() > 0.9 and sliding.model.weights[:60].max() == 0  # locked on the block
+    assert sliding.inertia.suspect and sliding.inertia.leading > 0.1
+    on_bone = stabilize(_head_with_a_block(False), 120.0)
+    assert on_bone.model.weights[:260].mean() > 0.9
+    assert not on_bone.inertia.suspect and on_bone.inertia.lagging > 0.9
