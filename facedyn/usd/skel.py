@@ -93,7 +93,14 @@ def plan_skel_bake(stage: Usd.Stage) -> SkelBake:
 
 
 def _bake(stage: Usd.Stage, roots: list[UsdSkel.Root], interval: Gf.Interval) -> None:
-    with Usd.EditContext(stage, stage.GetSessionLayer()):
+    """Bake `roots` over `interval` into the session layer, at the stage's time codes.
+
+    The session layer's own timeCodesPerSecond (24 unless authored) would otherwise scale
+    what is baked into it on a stage at another rate (120: frame 1001 read back as 5005).
+    """
+    session = stage.GetSessionLayer()
+    session.timeCodesPerSecond = stage.GetTimeCodesPerSecond()
+    with Usd.EditContext(stage, session):
         for root in roots:
             if not UsdSkel.BakeSkinning(root, interval):
                 raise TakeError(f"{layer_name(stage)}: {root.GetPath()}: UsdSkel could not bake its skinning (see USD's warnings)")

@@ -18,13 +18,13 @@ from usd_fixtures import grid_mesh
 FIRST = 1001
 
 
-def _rig(path, count: int, animated: bool = True):
+def _rig(path, count: int, animated: bool = True, fps: float = 24.0):
     """A 3x3 grid skinned to one joint keyed every third frame (the frames between are the stage's playback
     frames), with a blend shape keyed on every frame of the middle third, under a skeleton moved on frames
-    of its own; without `animated`, nothing is keyed."""
+    of its own, at `fps`; without `animated`, nothing is keyed."""
     stage = Usd.Stage.CreateNew(str(path))
-    stage.SetTimeCodesPerSecond(24)
-    stage.SetFramesPerSecond(24)
+    stage.SetTimeCodesPerSecond(fps)
+    stage.SetFramesPerSecond(fps)
     stage.SetStartTimeCode(FIRST)
     stage.SetEndTimeCode(FIRST + count - 1)
     UsdGeom.SetStageMetersPerUnit(stage, 0.01)
@@ -79,6 +79,7 @@ def _whole_bake(path):
     A mesh bound to one joint is baked rigidly: its points get the blend shapes, its transform the joint.
     """
     stage = Usd.Stage.Open(str(path))
+    stage.GetSessionLayer().timeCodesPerSecond = stage.GetTimeCodesPerSecond()  # else baked at 24 per second
     with Usd.EditContext(stage, stage.GetSessionLayer()):
         assert UsdSkel.BakeSkinning(UsdSkel.Root(stage.GetPrimAtPath("/Rig")), Gf.Interval.GetFullInterval())
     prim = stage.GetPrimAtPath("/Rig/Face")
@@ -97,12 +98,14 @@ def test_the_planned_time_codes_are_the_whole_bakes(tmp_path):
     np.testing.assert_array_equal(frames, np.arange(FIRST, FIRST + 100))
 
 
-def test_a_streamed_skel_import_equals_the_whole_bake(tmp_path, monkeypatch):
-    rig = _rig(tmp_path / "rig.usda", 150)
+@pytest.mark.parametrize("fps", [24.0, 120.0])
+def test_a_streamed_skel_import_equals_the_whole_bake(tmp_path, monkeypatch, fps):
+    """At the session layer's default rate and another: the bake is read at the stage's time codes."""
+    rig = _rig(tmp_path / "rig.usda", 150, fps=fps)
     take = _streamed_and_whole(tmp_path, monkeypatch, rig)
     frames, points = _whole_bake(rig)
     np.testing.assert_array_equal(take.frames, frames)
-    assert len(frames) > 9 * CHUNK
+    np.testing.assert_array_equal(frames, np.arange(FIRST, FIRST + 148))  # to the last joint key (every third frame)
     np.testing.assert_allclose(take.points, points, atol=1e-5)
     assert np.ptp(points, axis=0).max() > 1.0  # the rig moves: the comparison is not of a still mesh
 
