@@ -6,8 +6,8 @@ evaluation (UsdSkel.BakeSkinning) turns it into time-sampled points and transfor
 authored into the stage's session layer, in memory, so the source file is never edited.
 Baking a whole take would hold every frame's points, so `plan_skel_bake` only works out which
 meshes the bake animates and at which time codes (from the animation's, the skinning's and
-the transforms' time samples, without baking), and `SkelBake.baked(first, last)` bakes one
-range of frames, for as long as it is read, then clears it.
+the transforms' time samples, without baking), and `SkelBake.baked(time_codes, mesh)` bakes
+one range of frames, for as long as it is read, then clears it.
 """
 from __future__ import annotations
 
@@ -36,30 +36,35 @@ class SkelBake:
         """The stage with the skinning from the first to the last of `time_codes` (None: the static value)
         baked into its session layer, cleared afterwards.
 
-        UsdSkel bakes the playback frames between a range's first and last driving samples only,
-        so the bake reaches out to the driving samples around the range. The points it bakes
-        for `prim` in the range must be at the planned time codes: a rig this module does not
-        foresee is an error, not frames silently missing.
+        The points UsdSkel bakes for `prim` in that range must be at the planned time codes:
+        a rig this module does not foresee is an error, not frames silently missing.
         """
         path = str(prim.GetPath())
         interval = Gf.Interval() if time_codes is None else Gf.Interval(float(time_codes[0]), float(time_codes[-1]))
-        bake_interval = interval
-        if path in self.keys and time_codes is not None:
-            keys = self.keys[path]
-            before, after = keys[keys <= interval.min], keys[keys >= interval.max]
-            bake_interval = Gf.Interval(before[-1] if len(before) else interval.min, after[0] if len(after) else interval.max)
         try:
-            _bake(self.stage, self.roots, bake_interval)
+            _bake(self.stage, self.roots, self._reaching_keys(path, interval))
             planned = self.time_codes.get(path)
             if planned is not None and time_codes is not None:
                 baked = np.array(UsdGeom.Mesh(prim).GetPointsAttr().GetTimeSamplesInInterval(interval))
                 expected = planned[(planned >= interval.min) & (planned <= interval.max)]
                 if not np.array_equal(baked, expected):
-                    raise TakeError(f"{layer_name(self.stage)}: {prim.GetPath()}: UsdSkel baked {len(baked)} time samples "
+                    raise TakeError(f"{layer_name(self.stage)}: {path}: UsdSkel baked {len(baked)} time samples "
                                     f"in {interval.min:g}:{interval.max:g}, {len(expected)} were expected from its animation")
             yield
         finally:
             self.stage.GetSessionLayer().Clear()
+
+    def _reaching_keys(self, path: str, interval: Gf.Interval) -> Gf.Interval:
+        """`interval` widened to the driving samples of mesh `path` at or around its ends.
+
+        UsdSkel bakes the playback frames only between the first and the last driving sample
+        inside the interval it is given, so a range cut between keys needs the keys around it.
+        """
+        keys = self.keys.get(path)
+        if keys is None or interval.IsEmpty():
+            return interval
+        before, after = keys[keys <= interval.min], keys[keys >= interval.max]
+        return Gf.Interval(before[-1] if len(before) else interval.min, after[0] if len(after) else interval.max)
 
 
 def plan_skel_bake(stage: Usd.Stage) -> SkelBake:
