@@ -1,10 +1,11 @@
 """An animated (or static) mesh in any USD file, read as a take holds it: world space, centimetres, Y up.
 
 What `import` and `actor` read from a capture that facedyn did not write. `open_mesh_source`
-opens the file once (baking a UsdSkel animation first, so a skinned or blend-shape rig's mesh
-counts as animated), picks the mesh and its time codes and reads the static setup (topology,
-uvs, facedyn attributes); `MeshSource.read` then reads any frames' points, checked and made
-canonical, so a long capture streams through a range of frames at a time.
+opens the file once, picks the mesh and its time codes (a skinned or blend-shape rig's mesh
+counts as animated: facedyn.usd.skel plans its bake) and reads the static setup (topology,
+uvs, facedyn attributes); `MeshSource.read` then reads any frames' points (baking a rig's
+skinning for just those frames), checked and made canonical, so a long capture streams
+through a range of frames at a time.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from pxr import Usd, UsdGeom
 from facedyn.performance import UVs, Topology
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
-from facedyn.usd.skel import bake_skel_animations
+from facedyn.usd.skel import SkelBake, plan_skel_bake
 from facedyn.usd.stage import get_prim, layer_name, open_stage
 from facedyn.usd.take import (ensure_plausible_points, find_animated_meshes, read_topology, read_uvs, read_vec3_samples,
                               select_time_codes)
@@ -38,6 +39,7 @@ class MeshSource:
     uvs: UVs | None
     face: schema.FaceAttributes  # the facedyn attributes authored on the source mesh
     timing: Timing  # the source stage's
+    skel: SkelBake | None = None  # the stage's UsdSkel rigs, baked a range of frames at a time as they are read
 
     @property
     def where(self) -> str:
@@ -53,8 +55,14 @@ class MeshSource:
         Each frame is checked (finite, a plausible shape, as many points as the topology
         indexes) as it is read, so a fault is found in whichever range holds it. The
         conversion runs in float64, BLOCK_FRAMES frames at a time, so that only the float32
-        result is held whole.
+        result is held whole. A rig's skinning is baked for these frames only, while they are read.
         """
+        if self.skel is None:
+            return self._read(time_codes)
+        with self.skel.baked(time_codes, self.prim):
+            return self._read(time_codes)
+
+    def _read(self, time_codes: np.ndarray | None) -> np.ndarray:
         geom = UsdGeom.Mesh(self.prim)
         if time_codes is None:
             value = geom.GetPointsAttr().Get()
@@ -91,13 +99,14 @@ def open_mesh_source(path: Path, mesh: str = "", frames: tuple[float, float] | N
     static setup and the time codes is read here.
     """
     stage = open_stage(path)
-    bake_skel_animations(stage)
+    skel = plan_skel_bake(stage)
     if mesh:
         prim = get_prim(stage, mesh)
         if not prim.IsA(UsdGeom.Mesh):
             raise TakeError(f"{layer_name(stage)}: {prim.GetPath()} is not a Mesh")
     else:
         animated = find_animated_meshes(stage)
+        animated += [p for p in map(stage.GetPrimAtPath, skel.time_codes) if p not in animated]
         if static_ok and not animated:
             animated = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
         if not animated:
@@ -107,13 +116,14 @@ def open_mesh_source(path: Path, mesh: str = "", frames: tuple[float, float] | N
             raise TakeError(f"{layer_name(stage)}: several {'animated ' if not static_ok else ''}meshes ({names}); choose one with --mesh")
         prim = animated[0]
     geom = UsdGeom.Mesh(prim)
-    if static_ok and geom.GetPointsAttr().GetNumTimeSamples() == 0:
+    skinned = skel.time_codes.get(str(prim.GetPath()))
+    if static_ok and skinned is None and geom.GetPointsAttr().GetNumTimeSamples() == 0:
         time_codes = None
     else:
-        time_codes = select_time_codes(stage, prim, frames, whole_frames)
+        time_codes = select_time_codes(stage, prim, frames, whole_frames, skinned)
     where = f"{layer_name(stage)}: {prim.GetPath()}"
     return MeshSource(stage, prim, time_codes, read_topology(geom, where), read_uvs(geom), schema.FaceAttributes.read(prim),
-                      Timing.from_stage(stage))
+                      Timing.from_stage(stage), skel if skel.roots else None)
 
 
 @dataclass

@@ -151,14 +151,16 @@ def find_animated_meshes(stage: Usd.Stage) -> list[Usd.Prim]:
 
 
 def select_time_codes(
-    stage: Usd.Stage, mesh_prim: Usd.Prim, frames: tuple[float, float] | None, whole_frames: bool = True
+    stage: Usd.Stage, mesh_prim: Usd.Prim, frames: tuple[float, float] | None, whole_frames: bool = True,
+    samples: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The points' time samples, restricted to `frames` (first, last), as float64.
+    """The points' time samples (or the given `samples`), restricted to `frames` (first, last), as float64.
 
     With `whole_frames` (every reader but a resampling import) they must be consecutive
     whole frames at the stage's rate (takechecks.frame_grid_problem), else a TakeError.
     """
-    samples = np.asarray(UsdGeom.Mesh(mesh_prim).GetPointsAttr().GetTimeSamples(), dtype=np.float64)
+    if samples is None:
+        samples = np.asarray(UsdGeom.Mesh(mesh_prim).GetPointsAttr().GetTimeSamples(), dtype=np.float64)
     if samples.size == 0:
         raise TakeError(f"{layer_name(stage)}: {mesh_prim.GetPath()}.points has no time samples (not an animated mesh)")
     if frames is not None:
