@@ -81,12 +81,6 @@ def reader_with_model(request: Request, role_name: str, kind: str):
     return reader, model
 
 
-def read_with_model(request: Request, role_name: str, kind: str):
-    """The whole take below `role_name` (in memory), its source, and a model of `kind` that fits it."""
-    reader, model = reader_with_model(request, role_name, kind)
-    return reader.read(0, reader.frame_count), reader.source, model
-
-
 def context_frames(model) -> int:
     """Frames of context on each side that make a chunk's result equal to the whole take's.
 
@@ -132,9 +126,3 @@ class OffsetStats:
         self.summary.update({f"peak_{self.what}_offset_mm": round(self.peak * 10, 3),
                              f"rms_{self.what}_offset_mm": round(float(np.sqrt(self.squares / self.count)) * 10, 3)})
         return offsets
-
-
-def offset_summary(offsets: np.ndarray, what: str) -> dict:
-    stats = OffsetStats(what)
-    stats.add(offsets)
-    return stats.summary

@@ -3,7 +3,8 @@
 `--method synthesis` (default, the paper's): A's skull trajectory is moved into B's skull
 space (facedyn.dynamics.retarget.align_trajectory) and B's own synthesis model makes B's
 dynamics for it. `--method delta-transfer`, the paper's naive baseline: A's per-vertex
-offsets copied onto B.
+offsets copied onto B. Both takes stream through in chunks (only the skull trajectories,
+7 numbers a frame, are read whole), with the model's context frames, as in synthesize.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import numpy as np
 from facedyn.errors import UsageError
 from facedyn.performance import BACKENDS
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device, single_input
-from facedyn.processors.synthesize import synthesized_output
+from facedyn.processors.synthesize import synthesized_layer
 from facedyn.progress import Progress
 
 
@@ -33,58 +34,79 @@ class RetargetProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.processors.remove import read_with_model
+        from facedyn.processors.remove import reader_with_model
         from facedyn.usd.errors import TakeError
-        from facedyn.usd.take import read_take_below
+        from facedyn.usd.frames import TakeFrames
 
         params = request.params
         if params["method"] == "synthesis":
             if params["model"] is None:
                 raise UsageError("--model is required with --method synthesis (actor B's synthesis model)")
-            perf, source, model = read_with_model(request, self.writes.role, "synthesis")
+            reader, model = reader_with_model(request, self.writes.role, "synthesis")
         else:
             if params["model"] is not None:
                 raise UsageError("--model: delta-transfer uses no model; leave it out")
-            path = single_input(request)
-            perf, source = read_take_below(path, self.writes.role, frames=request.frames)
-            model = None
+            reader, model = TakeFrames(single_input(request), self.writes.role, frames=request.frames), None
         # Actor A's skull motion is its stabilized take (below any quasistatic layer); its offsets, for
         # delta-transfer, are its quasistatic take's (below any synthesized variant).
-        a, _ = read_take_below(params["source"], "quasistatic" if params["method"] == "synthesis" else "synthesized")
-        if a.skull_orient is None:
+        a = TakeFrames(params["source"], "quasistatic" if params["method"] == "synthesis" else "synthesized")
+        b = reader.head
+        if a.head.skull_orient is None:
             raise TakeError(f"{params['source']}: actor A's take has no solved skull motion (stabilize it first)")
-        if a.point_count != perf.point_count:
-            raise TakeError(f"{params['source']}: {a.point_count} points, the target take {perf.point_count}; retargeting needs one topology")
-        if abs(a.fps - perf.fps) > 1e-6:
-            raise TakeError(f"{params['source']}: runs at {a.fps:g} fps, the target take at {perf.fps:g} fps")
-        if a.frame_count < perf.frame_count:
-            raise TakeError(f"{params['source']}: {a.frame_count} frames for a {perf.frame_count}-frame target take")
-        if params["method"] == "delta-transfer" and a.offsets is None:
+        if a.head.point_count != b.point_count:
+            raise TakeError(f"{params['source']}: {a.head.point_count} points, the target take {b.point_count}; retargeting needs one topology")
+        if abs(a.fps - reader.fps) > 1e-6:
+            raise TakeError(f"{params['source']}: runs at {a.fps:g} fps, the target take at {reader.fps:g} fps")
+        if a.frame_count < reader.frame_count:
+            raise TakeError(f"{params['source']}: {a.frame_count} frames for a {reader.frame_count}-frame target take")
+        if params["method"] == "delta-transfer" and a.head.offsets is None:
             raise TakeError(f"{params['source']}: delta-transfer needs actor A's dynamics offsets (its quasistatic layer)")
         description = {"target_take": str(request.inputs[0]), "source_take": str(params["source"]),
-                       "frames": perf.frame_count, "method": params["method"]}
-        return Plan(description, (perf, source, model, a, params))
+                       "frames": reader.frame_count, "method": params["method"]}
+        return Plan(description, (reader, model, a, params))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
         from facedyn.dynamics.synthesis import synthesize_dynamics
+        from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames
+        from facedyn.usd.layers import LayerContent
 
-        perf, source, model, a, params = plan.state
-        f = perf.frame_count
-        rest_a = a.rest_points if a.rest_points is not None else a.points[0]
-        rest_b = perf.rest_points if perf.rest_points is not None else perf.points[0]
+        reader, model, a, params = plan.state
+        f = reader.frame_count
+        rest_a, rest_b = rest_points(a), rest_points(reader)
         rigid = None
-        if perf.rigid_weights is not None and np.count_nonzero(perf.rigid_weights >= 0.99) >= 3:
-            rigid = np.flatnonzero(perf.rigid_weights >= 0.99)
+        weights = reader.head.rigid_weights
+        if weights is not None and np.count_nonzero(weights >= 0.99) >= 3:
+            rigid = np.flatnonzero(weights >= 0.99)
         t_a, q_a = a.skull()
         translate, orient = align_trajectory(t_a[:f], q_a[:f], rest_a, rest_b, vertices=rigid)
-        progress.start(f"retarget ({params['method']})", 1)
-        if params["method"] == "synthesis":
-            points, offsets = synthesize_dynamics(perf.points, translate, orient, perf.fps, model,
-                                                  backend=params["backend"], device=params["device"])
-        else:
-            rotation, _ = skull_correspondence(rest_a, rest_b, rigid)
-            points, offsets = delta_transfer(a.offsets[:f], perf.points, rotation)
-        progress.finish()
-        return synthesized_output(perf, source, params["model"], points, offsets, translate, orient, self.writes.role,
-                                  {"source": str(params["source"]), "method": params["method"]})
+        rotation = skull_correspondence(rest_a, rest_b, rigid)[0] if model is None else None
+        stats = OffsetStats("synthesized")
+
+        def chunks():
+            progress.start(f"retarget ({params['method']})", f)
+            for window in reader.windows(CHUNK_FRAMES, 0 if model is None else context_frames(model)):
+                if model is None:
+                    points, offsets = delta_transfer(a.read(window.lo, window.hi).offsets, window.take.points, rotation)
+                else:
+                    points, offsets = synthesize_dynamics(window.take.points, translate[window.lo:window.hi],
+                                                          orient[window.lo:window.hi], reader.fps, model,
+                                                          backend=params["backend"], device=params["device"])
+                inner = window.inner
+                yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=points[inner],
+                                   offsets=stats.add(offsets[inner]), skull_translate=translate[window.start:window.stop],
+                                   skull_orient=orient[window.start:window.stop])
+                progress.advance(window.stop - window.start)
+            progress.finish()
+
+        stats.summary.update({"source": str(params["source"]), "method": params["method"]})
+        output = synthesized_layer(reader.time_codes, reader.head.landmarks, reader.source, params["model"], self.writes.role,
+                                   stats.summary)
+        output.chunks = chunks()
+        return output
+
+
+def rest_points(reader) -> np.ndarray:
+    """A take's rest mesh in skull space, else its first frame."""
+    rest = reader.head.rest_points
+    return rest if rest is not None else reader.read(0, 1).points[0]

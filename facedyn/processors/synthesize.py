@@ -12,7 +12,7 @@ from pathlib import Path
 
 from facedyn.performance import BACKENDS
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device
-from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames, model_inputs, offset_summary, reader_with_model
+from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames, model_inputs, reader_with_model
 from facedyn.progress import Progress
 
 
@@ -85,15 +85,6 @@ class SynthesizeProcessor(Processor):
 def bvh_options(params: dict) -> dict:
     """The BVH conventions given on the command line (the rest are read from the file)."""
     return {key: params[f"bvh_{key}"] for key in ("units", "up", "forward") if params[f"bvh_{key}"] is not None}
-
-
-def synthesized_output(perf, source, model_path, points, offsets, translate, orient, role_name, extra) -> LayerOutput:
-    """The layer of new dynamics on a quasistatic take (synthesize and retarget write the same shape)."""
-    output = synthesized_layer(perf.frames, perf.landmarks, source, model_path, role_name,
-                               {**extra, **offset_summary(offsets, "synthesized")})
-    output.layer.points, output.layer.offsets = points, offsets
-    output.layer.skull_translate, output.layer.skull_orient = translate, orient
-    return output
 
 
 def synthesized_layer(frames, landmarks, source, model_path, role_name, summary) -> LayerOutput:

@@ -240,3 +240,31 @@ def test_issue_15_partial_frames_and_failed_attaches_leave_nothing(corpus, tmp_p
         assert cli("stabilize", root, "-o", take / "orphan.usdc", "--attach", bad_root) == 1
         assert not (take / "orphan.usdc").exists()
     assert _stack(root) == ["./capture.usdc"]
+
+
+def _layer_points(path: Path) -> np.ndarray:
+    """Every time sample of the points a layer (of overs) authors."""
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    found = []
+    layer.Traverse("/", lambda spec_path: found.append(spec_path) if spec_path.name == "points" else None)
+    return np.array([np.asarray(layer.QueryTimeSample(found[0], t)) for t in layer.ListTimeSamplesForPath(found[0])])
+
+
+def test_retarget_streams_in_chunks_that_equal_the_whole_take(corpus, tmp_path, monkeypatch):
+    import facedyn.processors.remove as remove
+
+    folder, models = corpus
+    root, other = folder / "pucker_walk" / "take.usda", folder / "smile_walk" / "take.usda"
+    for take in (root, other):
+        if not (take.parent / "quasistatic.usdc").exists():
+            assert cli("stabilize", take, "-o", take.parent / "stabilized.usdc", "--attach", take) == 0
+            assert cli("remove", take, "--model", models / "f.removal", "-o", take.parent / "quasistatic.usdc", "--attach", take) == 0
+    methods = {"synthesis": ("--model", models / "h.synthesis"), "delta-transfer": ("--method", "delta-transfer")}
+    for label, chunk in (("whole", remove.CHUNK_FRAMES), ("chunked", 16)):  # one chunk for this 1 s take, then several
+        monkeypatch.setattr(remove, "CHUNK_FRAMES", chunk)
+        for name, flags in methods.items():
+            assert cli("retarget", root, "--source", other, *flags, "-o", tmp_path / f"{name}.{label}.usdc") == 0
+    for name in methods:
+        whole, chunked = _layer_points(tmp_path / f"{name}.whole.usdc"), _layer_points(tmp_path / f"{name}.chunked.usdc")
+        assert len(whole) > 16 and whole.shape == chunked.shape
+        np.testing.assert_allclose(chunked, whole, atol=1e-5)
