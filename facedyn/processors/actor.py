@@ -95,15 +95,26 @@ def _from_neutral(path: Path, params: dict, name: str):
 
 def _from_takes(paths: list[Path], params: dict, name: str):
     """The rigid mode found on the first take, each later take registered to it and merged in."""
-    from facedyn.usd.source import read_usd_mesh
     from facedyn.stabilize.rigidity import estimate_rigidity
 
     first, found = None, None
     for path in paths:
-        mesh = read_usd_mesh(path, params["mesh"])
-        if first is not None and mesh.topology.fingerprint() != first.topology.fingerprint():
+        source, points = _rigidity_sample(path, params["mesh"])
+        if first is not None and source.topology.fingerprint() != first.topology.fingerprint():
             raise UsageError(f"{path}: its mesh topology differs from {paths[0]}'s; an actor has one topology")
-        model = estimate_rigidity(mesh.points, prior=found)
-        found, first = (model if found is None else found.merge(model)), first or mesh
+        model = estimate_rigidity(points, prior=found)
+        found, first = (model if found is None else found.merge(model)), first or source
     return _actor(name, "takes", params["samples"], neutral=found.rest, topology=first.topology, uvs=first.uvs,
                   rigid_weights=found.weights.astype(np.float32))
+
+
+def _rigidity_sample(path: Path, mesh: str):
+    """A capture's source and the evenly spaced frames rigidity statistics read (all of a short take),
+    read a frame at a time, so a long take is never whole in memory."""
+    from facedyn.stabilize.rest import sample_frames
+    from facedyn.stabilize.rigidity import SAMPLE_FRAMES
+    from facedyn.usd.source import open_mesh_source
+
+    source = open_mesh_source(path, mesh)
+    codes = source.time_codes[sample_frames(len(source.time_codes), SAMPLE_FRAMES)]
+    return source, np.concatenate([source.read(codes[i:i + 1]) for i in range(len(codes))])
