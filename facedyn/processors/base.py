@@ -114,6 +114,7 @@ class Reads:
     what: str  # "take": one take root; "takes": takes, take folders or corpus folders; "sources": files; "nothing"
     metavar: str = "TAKE"
     help: str = ""
+    frame_range: bool = False  # takes --frames FIRST:LAST (every layer step does)
 
     @property
     def many(self) -> bool:

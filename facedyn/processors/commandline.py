@@ -140,6 +140,7 @@ def add_processor_parser(commands, processor) -> None:
                    metavar=writes.metavar, help=output_help)
     if writes.what == "layer":
         p.add_argument("--attach", type=Path, metavar="ROOT", help="place the output in ROOT's subLayers by its role")
+    if writes.what == "layer" or reads.frame_range:
         p.add_argument("--frames", type=_frame_range, metavar="FIRST:LAST", help="only these frames (inclusive time codes)")
     p.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE", help="set a parameter by name")
     p.add_argument("--dry-run", action="store_true", help="read and check the inputs and parameters, write nothing")

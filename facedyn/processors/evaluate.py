@@ -22,13 +22,14 @@ from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Re
 from facedyn.progress import Progress
 
 QUASISTATIC_BELOW = "synthesized"  # evaluate reads what remove wrote: everything below the synthesized role
+MAX_FRAMES = 10_000  # frames of a take evaluate reads (whole, for its spectra): about 2 GB at 4,000 points
 
 
 class EvaluateProcessor(Processor):
     name = "evaluate"
     version = "1"
     summary = "truth-free diagnostics of removed dynamics on captures (numbers and a plot)"
-    reads = Reads("takes", metavar="TAKE", help="take roots after remove (one or more)")
+    reads = Reads("takes", metavar="TAKE", help="take roots after remove (one or more)", frame_range=True)
     writes = Writes("folder", metavar="DIR", help="the folder for report.json and diagnostics.png")
     parameters = (
         Parameter("held_expression", bool, False, "the takes hold one expression under different motions: report its spread"),
@@ -49,6 +50,7 @@ class EvaluateProcessor(Processor):
         params = request.params
         takes = []
         for path in request.inputs:
+            check_length(path, request.frames)
             perf, _ = read_take_below(path, QUASISTATIC_BELOW, frames=request.frames)
             if perf.offsets is None:
                 raise TakeError(f"{path}: no removed offsets (primvars:facedyn:dynamicsOffset); run `usdfacedyn remove` first")
@@ -92,6 +94,16 @@ class EvaluateProcessor(Processor):
         lines = [f"report: {summary['report']}", f"plot: {summary['plot']}"]
         lines += [f"{k}: {v}" for k, v in summary.items() if k not in ("report", "plot")]
         return "\n".join(lines)
+
+
+def check_length(path: Path, frames) -> None:
+    """Refuse a selection longer than MAX_FRAMES before any frame is read."""
+    from facedyn.usd.frames import TakeFrames
+
+    count = TakeFrames(path, QUASISTATIC_BELOW, frames=frames).frame_count
+    if count > MAX_FRAMES:
+        raise UsageError(f"{path}: {count} frames selected; evaluate reads at most {MAX_FRAMES:,} frames of a take "
+                         "whole (its spectra and spreads): choose a range with --frames FIRST:LAST")
 
 
 def face_vertices(perf) -> np.ndarray:

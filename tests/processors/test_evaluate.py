@@ -50,3 +50,17 @@ def test_evaluate_refuses_takes_without_removal(corpus, tmp_path, capsys):
     assert cli("evaluate", corpus / "smile_walk" / "truth.usda", "-o", tmp_path / "e2", "--held-expression", "true") == 2
     assert "at least two" in capsys.readouterr().err
     assert not (tmp_path / "e1").exists() and not (tmp_path / "e2").exists()
+
+
+def test_evaluate_refuses_more_frames_than_it_reads_whole_and_takes_a_range(corpus, tmp_path, capsys, monkeypatch):
+    import facedyn.processors.evaluate as evaluate
+
+    monkeypatch.setattr(evaluate, "MAX_FRAMES", 100)
+    root = corpus / "smile_walk" / "truth.usda"
+    assert cli("evaluate", root, "-o", tmp_path / "long") == 2
+    assert "evaluate reads at most 100 frames" in capsys.readouterr().err and not (tmp_path / "long").exists()
+    from facedyn.usd.frames import TakeFrames
+
+    first = int(TakeFrames(root, "synthesized").time_codes[0])
+    assert cli("evaluate", root, "-o", tmp_path / "range", "--frames", f"{first}:{first + 79}") == 0
+    assert json.loads((tmp_path / "range" / "report.json").read_text())["takes"][0]["frames"] == 80
