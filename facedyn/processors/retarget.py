@@ -15,7 +15,7 @@ import numpy as np
 from facedyn.errors import UsageError
 from facedyn.performance import BACKENDS
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device, single_input
-from facedyn.processors.synthesize import synthesized_layer
+from facedyn.processors.synthesize import synthesized_chunk, synthesized_layer
 from facedyn.progress import Progress
 
 
@@ -69,7 +69,6 @@ class RetargetProcessor(Processor):
         from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
         from facedyn.dynamics.synthesis import synthesize_dynamics
         from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames
-        from facedyn.usd.layers import LayerContent
 
         reader, model, a, params = plan.state
         f = reader.frame_count
@@ -92,10 +91,7 @@ class RetargetProcessor(Processor):
                     points, offsets = synthesize_dynamics(window.take.points, translate[window.lo:window.hi],
                                                           orient[window.lo:window.hi], reader.fps, model,
                                                           backend=params["backend"], device=params["device"])
-                inner = window.inner
-                yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=points[inner],
-                                   offsets=stats.add(offsets[inner]), skull_translate=translate[window.start:window.stop],
-                                   skull_orient=orient[window.start:window.stop])
+                yield synthesized_chunk(reader, window, points, offsets, translate, orient, stats)
                 progress.advance(window.stop - window.start)
             progress.finish()
 

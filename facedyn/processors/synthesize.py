@@ -57,7 +57,6 @@ class SynthesizeProcessor(Processor):
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.dynamics.synthesis import synthesize_dynamics
-        from facedyn.usd.layers import LayerContent
 
         reader, model, params, translate, orient, described = plan.state
         stats = OffsetStats("synthesized")
@@ -68,10 +67,7 @@ class SynthesizeProcessor(Processor):
                 t, q = translate[window.lo:window.hi], orient[window.lo:window.hi]
                 points, offsets = synthesize_dynamics(window.take.points, t, q, reader.fps, model,
                                                       backend=params["backend"], device=params["device"])
-                inner = window.inner
-                yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=points[inner],
-                                   offsets=stats.add(offsets[inner]), skull_translate=translate[window.start:window.stop],
-                                   skull_orient=orient[window.start:window.stop])
+                yield synthesized_chunk(reader, window, points, offsets, translate, orient, stats)
                 progress.advance(window.stop - window.start)
             progress.finish()
 
@@ -85,6 +81,17 @@ class SynthesizeProcessor(Processor):
 def bvh_options(params: dict) -> dict:
     """The BVH conventions given on the command line (the rest are read from the file)."""
     return {key: params[f"bvh_{key}"] for key in ("units", "up", "forward") if params[f"bvh_{key}"] is not None}
+
+
+def synthesized_chunk(reader, window, points, offsets, translate, orient, stats):
+    """One window's output frames of a synthesized layer (synthesize and retarget write the same shape):
+    points and offsets computed over the window's frames, the skull motion over the take's."""
+    from facedyn.usd.layers import LayerContent
+
+    inner = window.inner
+    return LayerContent(frames=reader.time_codes[window.start:window.stop], points=points[inner],
+                        offsets=stats.add(offsets[inner]), skull_translate=translate[window.start:window.stop],
+                        skull_orient=orient[window.start:window.stop])
 
 
 def synthesized_layer(frames, landmarks, source, model_path, role_name, summary) -> LayerOutput:
