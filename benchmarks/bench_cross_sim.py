@@ -35,7 +35,8 @@ on the solved take. One JSON object per case.
     .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--work DIR]
 
 A small-budget protocol (demo-scale corpus with the procedural talking takes, no Live Link
-performances, short takes, few epochs), sized to run within about an hour on 2 cores.
+performances, short takes, few epochs): measured on 2 cores partly shared with other jobs,
+training 4.9 minutes and testing two actors 9.6 minutes.
 """
 from __future__ import annotations
 
