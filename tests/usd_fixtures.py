@@ -46,3 +46,29 @@ def grid_mesh(n: int = 6):
             quads.append([a, a + 1, a + n + 1, a + n])
     quads = np.asarray(quads, np.int32)
     return points, np.full(len(quads), 4, np.int32), quads.ravel()
+
+
+def one_joint_skeleton(stage, path: str, joint: str, blend_shapes=()):
+    """A UsdSkel Skeleton at `path` with one joint at the identity and its Animation (`path`/Anim) bound as its source."""
+    from pxr import Gf, UsdSkel
+
+    skel = UsdSkel.Skeleton.Define(stage, path)
+    skel.CreateJointsAttr([joint])
+    skel.CreateBindTransformsAttr([Gf.Matrix4d(1)])
+    skel.CreateRestTransformsAttr([Gf.Matrix4d(1)])
+    anim = UsdSkel.Animation.Define(stage, f"{path}/Anim")
+    anim.CreateJointsAttr([joint])
+    anim.CreateBlendShapesAttr(list(blend_shapes))
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    return skel, anim
+
+
+def bind_rigidly(prim, skel):
+    """Skin `prim` to the skeleton's one joint with weight 1 (its UsdSkel.BindingAPI, for blend shapes)."""
+    from pxr import UsdSkel
+
+    binding = UsdSkel.BindingAPI.Apply(prim)
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(constant=True, elementSize=1).Set([0])
+    binding.CreateJointWeightsPrimvar(constant=True, elementSize=1).Set([1.0])
+    return binding

@@ -12,8 +12,8 @@ from facedyn.usd.skel import plan_skel_bake
 from facedyn.usd.source import open_mesh_source, read_usd_mesh
 from facedyn.usd.take import read_vec3_samples
 
-from test_import_stream import CHUNK, _import, _streamed_and_whole
-from usd_fixtures import grid_mesh
+from test_import_stream import _import, _streamed_and_whole
+from usd_fixtures import bind_rigidly, grid_mesh, one_joint_skeleton
 
 FIRST = 1001
 
@@ -30,13 +30,7 @@ def _rig(path, count: int, animated: bool = True, fps: float = 24.0):
     UsdGeom.SetStageMetersPerUnit(stage, 0.01)
     UsdGeom.SetStageUpAxis(stage, "Y")
     root = UsdSkel.Root.Define(stage, "/Rig")
-    skel = UsdSkel.Skeleton.Define(stage, "/Rig/Skel")
-    skel.CreateJointsAttr(["head"])
-    skel.CreateBindTransformsAttr([Gf.Matrix4d(1)])
-    skel.CreateRestTransformsAttr([Gf.Matrix4d(1)])
-    anim = UsdSkel.Animation.Define(stage, "/Rig/Skel/Anim")
-    anim.CreateJointsAttr(["head"])
-    anim.CreateBlendShapesAttr(["smile"])
+    skel, anim = one_joint_skeleton(stage, "/Rig/Skel", "head", ["smile"])
     rng = np.random.default_rng(7)
     if animated:
         for t in range(FIRST, FIRST + count, 3):
@@ -52,16 +46,12 @@ def _rig(path, count: int, animated: bool = True, fps: float = 24.0):
         anim.CreateTranslationsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(1, 2, 3)]))
         anim.CreateRotationsAttr().Set(Vt.QuatfArray([Gf.Quatf(1)]))
     anim.CreateScalesAttr().Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)]))
-    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
     points, counts, indices = grid_mesh(3)
     mesh = UsdGeom.Mesh.Define(stage, "/Rig/Face")
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.asarray(points, np.float32) * 3))
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray([int(c) for c in counts]))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([int(i) for i in indices]))
-    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
-    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
-    binding.CreateJointIndicesPrimvar(constant=True, elementSize=1).Set([0])
-    binding.CreateJointWeightsPrimvar(constant=True, elementSize=1).Set([1.0])
+    binding = bind_rigidly(mesh.GetPrim(), skel)
     binding.CreateGeomBindTransformAttr().Set(Gf.Matrix4d(1))
     shape = UsdSkel.BlendShape.Define(stage, "/Rig/Face/smile")
     shape.CreateOffsetsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 3, 0), Gf.Vec3f(1, 0, 0)]))

@@ -5,6 +5,8 @@ from pxr import Gf, Usd, UsdGeom, UsdSkel, Vt
 from facedyn.cli import main
 from facedyn.usd.take import read_take
 
+from usd_fixtures import bind_rigidly, one_joint_skeleton
+
 REST = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
 FRAMES = [1, 2, 3, 4]
 
@@ -16,27 +18,17 @@ def _small_rig(path):
     UsdGeom.SetStageMetersPerUnit(stage, 0.01)
     UsdGeom.SetStageUpAxis(stage, "Y")
     root = UsdSkel.Root.Define(stage, "/Rig")
-    skel = UsdSkel.Skeleton.Define(stage, "/Rig/Skel")
-    skel.CreateJointsAttr(["head"])
-    skel.CreateBindTransformsAttr([Gf.Matrix4d(1)])
-    skel.CreateRestTransformsAttr([Gf.Matrix4d(1)])
-    anim = UsdSkel.Animation.Define(stage, "/Rig/Skel/Anim")
-    anim.CreateJointsAttr(["head"])
-    anim.CreateBlendShapesAttr(["smile"])
+    skel, anim = one_joint_skeleton(stage, "/Rig/Skel", "head", ["smile"])
     for i, t in enumerate(FRAMES):
         anim.CreateBlendShapeWeightsAttr().Set(Vt.FloatArray([i / 3.0]), t)
         anim.CreateTranslationsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(i, 0, 0)]), t)
         anim.CreateRotationsAttr().Set(Vt.QuatfArray([Gf.Quatf(1, 0, 0, 0)]), t)
         anim.CreateScalesAttr().Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)]), t)
-    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
     mesh = UsdGeom.Mesh.Define(stage, "/Rig/Face")
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(REST))
     mesh.CreateFaceVertexCountsAttr([4])
     mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
-    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
-    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
-    binding.CreateJointIndicesPrimvar(constant=True, elementSize=1).Set([0])
-    binding.CreateJointWeightsPrimvar(constant=True, elementSize=1).Set([1.0])
+    binding = bind_rigidly(mesh.GetPrim(), skel)
     binding.CreateGeomBindTransformAttr().Set(Gf.Matrix4d(1))
     shape = UsdSkel.BlendShape.Define(stage, "/Rig/Face/smile")
     shape.CreateOffsetsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 3, 0)]))
@@ -87,20 +79,10 @@ def test_import_bakes_the_ict_rig_driven_by_weights(tmp_path, shared_data):
     performance.GetRootLayer().subLayerPaths = [str(ict_rig)]
     performance.SetTimeCodesPerSecond(24)
     performance.SetFramesPerSecond(24)
-    skel = UsdSkel.Skeleton.Define(performance, "/ICTFace/Skel")
-    skel.CreateJointsAttr(["root"])
-    skel.CreateBindTransformsAttr([Gf.Matrix4d(1)])
-    skel.CreateRestTransformsAttr([Gf.Matrix4d(1)])
-    anim = UsdSkel.Animation.Define(performance, "/ICTFace/Skel/Anim")
-    anim.CreateJointsAttr(["root"])
-    anim.CreateBlendShapesAttr(names)
+    skel, anim = one_joint_skeleton(performance, "/ICTFace/Skel", "root", names)
     for t, w in enumerate(weights, start=1):
         anim.CreateBlendShapeWeightsAttr().Set(Vt.FloatArray(list(w)), t)
-    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
-    binding = UsdSkel.BindingAPI(performance.OverridePrim("/ICTFace/Skin"))
-    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
-    binding.CreateJointIndicesPrimvar(constant=True, elementSize=1).Set([0])
-    binding.CreateJointWeightsPrimvar(constant=True, elementSize=1).Set([1.0])
+    bind_rigidly(performance.OverridePrim("/ICTFace/Skin"), skel)
     performance.Save()
     assert _import(tmp_path / "performance.usda", tmp_path / "capture.usdc") == 0
     perf, _ = read_take(tmp_path / "take.usda")
