@@ -15,7 +15,7 @@ dropped frames: facedyn.sim.noise), exported as mesh caches in metres, Z up, fir
 1001, imported and stabilized with the console defaults (benchmarks/plain_capture.py);
 see plain_cases below.
 
-    python benchmarks/bench_stabilize_accuracy.py [--rig ../shared/data/ict-facekit/ict_face_rig.usdc] [--plain]
+    python benchmarks/bench_stabilize_accuracy.py [--rig ../shared/data/ict-facekit/ict_face_rig.usdc] [--plain [--seconds S]]
 """
 from __future__ import annotations
 
@@ -49,6 +49,7 @@ def main() -> None:
     parser.add_argument("--rig", type=Path, help="UsdSkel blend-shape rig (default: the built-in face)")
     parser.add_argument("--iterations", type=int, default=12)
     parser.add_argument("--plain", action="store_true", help="the plain-capture cases (no rest, no mask) instead")
+    parser.add_argument("--seconds", type=float, help="--plain: cut every take to at most this long (default: as defined)")
     args = parser.parse_args()
     if args.rig:
         from facedyn.usd.rig import read_blendshape_rig
@@ -59,7 +60,7 @@ def main() -> None:
     if args.plain:
         from bench_stabilize_plain import run_plain_cases
 
-        run_plain_cases(rig, DATA, short=args.rig is not None)
+        run_plain_cases(rig, DATA, rig_cases=args.rig is not None, seconds=args.seconds)
         return
     weights = rig.rigid_weights.astype(np.float64)
     three = tuple(rig.landmarks[k] for k in ("eye_corner_left", "eye_corner_right", "nose_base"))

@@ -94,15 +94,19 @@ def _from_neutral(path: Path, params: dict, name: str):
 
 
 def _from_takes(paths: list[Path], params: dict, name: str):
-    """The rigid mode found on the first take, each later take registered to it and merged in."""
-    from facedyn.stabilize.rigidity import estimate_rigidity
+    """The rigid mode found on the first take (checked to be the skull's, not a sliding block's, on its middle
+    frames: facedyn.stabilize.rigidity.discover_rigid_mode), each later take registered to it and merged in."""
+    from facedyn.stabilize.rigidity import discover_rigid_mode, estimate_rigidity
 
     first, found = None, None
     for path in paths:
         source, points = _rigidity_sample(path, params["mesh"])
         if first is not None and source.topology.fingerprint() != first.topology.fingerprint():
             raise UsageError(f"{path}: its mesh topology differs from {paths[0]}'s; an actor has one topology")
-        model = estimate_rigidity(points, prior=found)
+        if found is None:
+            model, _ = discover_rigid_mode(points, source.timing.frames_per_second, _middle_frames(source))
+        else:
+            model = estimate_rigidity(points, prior=found)
         found, first = (model if found is None else found.merge(model)), first or source
     return _actor(name, "takes", params["samples"], neutral=found.rest, topology=first.topology, uvs=first.uvs,
                   rigid_weights=found.weights.astype(np.float32))
@@ -118,3 +122,14 @@ def _rigidity_sample(path: Path, mesh: str):
     source = open_mesh_source(path, mesh)
     codes = source.time_codes[sample_frames(len(source.time_codes), SAMPLE_FRAMES)]
     return source, np.concatenate([source.read(codes[i:i + 1]) for i in range(len(codes))])
+
+
+def _middle_frames(source):
+    """The consecutive frames in the middle of a capture that a discovered mode's inertia is checked on, dropped
+    frames bridged."""
+    from facedyn.stabilize.dropped import bridge_dropped, tracked_frames
+    from facedyn.stabilize.rigidity import middle_window
+
+    codes = source.time_codes[middle_window(len(source.time_codes), source.timing.frames_per_second)]
+    window = source.read(codes)
+    return bridge_dropped(window, tracked_frames(window))

@@ -156,7 +156,7 @@ class _ChunkedSolve:
         params, reader = self.params, self.reader
         weights, rest = self.weights, self.rest
         if len(self.ranges) > 1 and self.prior is None and (rest is None or (weights is None and params["method"] == "mode-pursuit")):
-            weights, rest = _whole_take_model(reader, params, weights, rest, self.three_point, self.schedule)
+            weights, rest, self.inertia = _whole_take_model(reader, params, weights, rest, self.three_point, self.schedule)
         blend = StreamingBlend(self.ranges, params["chunk_overlap"] // 2)
         progress.start(f"stabilize ({params['method']})", reader.frame_count)
         for k, (start, stop) in enumerate(self.ranges):
@@ -212,35 +212,42 @@ class _ChunkedSolve:
             summary["smoothing_hz"] = self.smoothing_hz
         if self.inertia is not None and self.inertia.suspect:
             summary["warning"] = (
-                f"the rigid mode found leads the head's motion as soft tissue would ({self.inertia.leading:.0%} of the "
-                f"other vertices lead it, {self.inertia.lagging:.0%} lag): it may be skin sliding on the skull; "
-                "stabilize with --actor (an actor made from the rig or a neutral scan)")
+                f"the rigid mode found is not the skull's: in its frame {self.inertia.feeding:.0%} of the other vertices "
+                f"move as if they fed energy into the head's motion, which soft tissue never does ({self.inertia.absorbing:.0%} "
+                "absorb it); it may be skin sliding on the skull. Stabilize with --actor (an actor made from the rig, a "
+                "neutral scan, or this actor's other takes)")
         return summary
 
 
 def _whole_take_model(reader, params, weights, rest, three_point, schedule):
-    """One rest mesh and rigid weights for every chunk of a long take, from an even sample of its frames.
+    """One rest mesh and rigid weights for every chunk of a long take, from an even sample of its frames, and the
+    discovered mode's inertia check (None where nothing was discovered).
 
     As stabilize() finds them on a whole take: a plain capture's rigid mode
-    (facedyn.stabilize.rigidity, on its own frame sample), a rest estimated from initially
-    aligned frames, or for the per-frame baselines the first frame.
+    (facedyn.stabilize.rigidity, on its own frame sample, checked on the take's middle
+    frames), a rest estimated from initially aligned frames, or for the per-frame
+    baselines the first frame.
     """
     from facedyn.geometry import rigid
     from facedyn.stabilize import rest as rest_estimate
     from facedyn.stabilize.api import INIT_ICP_ITERATIONS, INIT_VERTICES, align_weighted
-    from facedyn.stabilize.rigidity import SAMPLE_FRAMES, estimate_rigidity
+    from facedyn.stabilize.dropped import bridge_dropped, tracked_frames
+    from facedyn.stabilize.rigidity import SAMPLE_FRAMES, discover_rigid_mode, middle_window
 
     count = reader.frame_count
     if params["method"] != "mode-pursuit":
-        return weights, reader.read(0, 1).world_points()[0].astype(np.float64)
+        return weights, reader.read(0, 1).world_points()[0].astype(np.float64), None
     if weights is None:
         sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count, SAMPLE_FRAMES)).world_points())
-        model = estimate_rigidity(sample)
-        return model.weights, model.rest
+        middle = middle_window(count, reader.fps)
+        window = reader.read(middle.start, middle.stop).world_points()
+        model, check = discover_rigid_mode(sample, reader.fps, bridge_dropped(window, tracked_frames(window)))
+        return model.weights, model.rest, check
     sample = _tracked(reader.read_frames(rest_estimate.sample_frames(count)).world_points())
     rot, trans = align_weighted(sample, sample[0].astype(np.float64), params["init"], weights, three_point,
                                 icp_iterations=INIT_ICP_ITERATIONS, most_vertices=INIT_VERTICES)
-    return weights, rest_estimate.estimate_rest(rigid.apply(rot, trans, sample.astype(np.float64)), schedule.widths_pos[-1])
+    rest = rest_estimate.estimate_rest(rigid.apply(rot, trans, sample.astype(np.float64)), schedule.widths_pos[-1])
+    return weights, rest, None
 
 
 def _tracked(world: np.ndarray) -> np.ndarray:

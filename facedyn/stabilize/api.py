@@ -21,7 +21,7 @@ from facedyn.stabilize.dropped import bridge_dropped, tracked_frames
 from facedyn.stabilize.fast import FastSolver
 from facedyn.stabilize.inertia import InertiaCheck, check_frame
 from facedyn.stabilize.modepursuit import StageRecord, mode_pursuit
-from facedyn.stabilize.rigidity import RigidModel, estimate_rigidity
+from facedyn.stabilize.rigidity import RigidModel, discover_rigid_mode, estimate_rigidity
 from facedyn.stabilize.schedule import Schedule
 from facedyn.stabilize.smoothing import smooth_skull_motion
 
@@ -157,7 +157,10 @@ def stabilize(
     t0 = time.perf_counter()
     model = None
     if method == "mode-pursuit" and weights is None and (rest is None or prior is not None):
-        model = estimate_rigidity(world, prior)
+        if prior is None:
+            model, _ = discover_rigid_mode(world, fps)  # the solved frame is checked again below
+        else:
+            model = estimate_rigidity(world, prior)
         weights = model.weights
         rest = model.rest if rest is None else rest
     elif prior is not None:

@@ -26,8 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from facedyn.geometry import rigid
+from facedyn.geometry import quaternion, rigid
+from facedyn.stabilize import inertia
 from facedyn.stabilize import rest as rest_estimate
+from facedyn.stabilize.inertia import InertiaCheck
 
 SAMPLE_FRAMES = 480  # evenly spaced frames the statistics are taken over
 ROUNDS = 3
@@ -45,6 +47,8 @@ FULL_WEIGHT = 1.1
 ZERO_WEIGHT = 1.3
 ICP_ITERATIONS = 5
 MIN_RIGID = 3
+WINDOW_SECONDS = 20.0  # consecutive seconds the inertia check of a discovered mode looks at
+FIT_VERTICES = 1024  # of the mode's vertices, evenly strided, that fit its frame for that check
 
 
 @dataclass
@@ -106,6 +110,7 @@ def estimate_rigidity(
     world: np.ndarray,
     prior: RigidModel | None = None,
     *,
+    seed: np.ndarray | None = None,
     width: float = 0.05,
     rounds: int = ROUNDS,
     sample_frames: int = SAMPLE_FRAMES,
@@ -116,7 +121,9 @@ def estimate_rigidity(
     Each round aligns the sampled frames to the current rest on the current weights
     (robust ICP), re-estimates the rest (per-vertex mode at ``width`` cm; kept fixed with
     a prior) and the weights from each vertex's spread. The first round aligns to the
-    first frame on every vertex, or to the prior.
+    first frame on every vertex (on the ``seed`` vertices, (N,) bool, where given), or to
+    the prior. A prior's fully rigid vertices, or the seed, are where the noise floor is
+    measured (noise_floor).
     """
     world = np.asarray(world)
     n = world.shape[1]
@@ -125,10 +132,14 @@ def estimate_rigidity(
     if rounds < 1:
         raise ValueError(f"rigidity rounds must be >= 1, got {rounds}")
     sample = world[rest_estimate.sample_frames(len(world), sample_frames)].astype(np.float64)
+    if seed is not None and (np.shape(seed) != (n,) or np.count_nonzero(seed) < MIN_RIGID):
+        raise ValueError(f"a rigidity seed must be (N,) = ({n},) bool with at least {MIN_RIGID} vertices set")
     if prior is None:
-        rest, weights = sample[0], np.ones(n)
+        rest, weights = sample[0], np.ones(n) if seed is None else np.asarray(seed, dtype=np.float64)
+        candidates = seed
     else:
         rest, weights = prior.rest, prior.weights
+        candidates = prior.weights >= 1.0
     for round_ in range(rounds):
         rot, trans, _ = rigid.robust_icp(sample, rest, weights, iterations=ICP_ITERATIONS)
         aligned = rigid.apply(rot, trans, sample)
@@ -136,7 +147,7 @@ def estimate_rigidity(
             last = round_ == rounds - 1
             rest = rest_estimate.estimate_rest(aligned, width) if last else rest_estimate.median_rest(aligned)
         spread = np.percentile(np.linalg.norm(aligned - rest, axis=-1), SPREAD_QUANTILE, axis=0)
-        floor = noise_floor(spread, prior)
+        floor = noise_floor(spread, candidates)
         weights = rigidity_weights(spread / floor)
         if prior is not None:
             weights = np.minimum(weights, prior.weights)
@@ -145,21 +156,76 @@ def estimate_rigidity(
     return RigidModel(weights, rest, spread, floor)
 
 
-def noise_floor(spread: np.ndarray, prior: RigidModel | None = None) -> float:
+def noise_floor(spread: np.ndarray, candidates: np.ndarray | None = None) -> float:
     """The tracking noise floor (cm): the spread FLOOR_QUANTILE % of the candidate vertices stay below.
 
-    Candidates are every vertex, or with a prior the vertices it holds fully rigid: an
-    actor knows where its bone is, and on a rig whose bone is a small part of the mesh
-    (the ICT rig: 8 %) a quantile over every vertex lands on soft tissue (0.53 cm on a run)
-    and would keep the prior's falloff, skin that slides against the skull, at full weight.
+    Candidates ((N,) bool) are every vertex, or the vertices known to hold the bone: a
+    prior's fully rigid ones (an actor knows where its bone is) or a seed. On a rig whose
+    bone is a small part of the mesh (the ICT rig: 8 %) a quantile over every vertex lands
+    on soft tissue (0.53 cm on a run) and would keep the prior's falloff, skin that slides
+    against the skull, at full weight.
     """
-    candidates = spread if prior is None else spread[prior.weights >= 1.0]
-    if len(candidates) < MIN_RIGID:
-        candidates = spread
-    return max(float(np.percentile(candidates, FLOOR_QUANTILE)), 1e-6)
+    chosen = spread if candidates is None else spread[candidates]
+    if len(chosen) < MIN_RIGID:
+        chosen = spread
+    return max(float(np.percentile(chosen, FLOOR_QUANTILE)), 1e-6)
 
 
 def rigidity_weights(relative_spread: np.ndarray) -> np.ndarray:
     """1 up to FULL_WEIGHT x the noise floor, easing (smoothstep) to 0 at ZERO_WEIGHT x."""
     t = np.clip((np.asarray(relative_spread) - FULL_WEIGHT) / (ZERO_WEIGHT - FULL_WEIGHT), 0.0, 1.0)
     return 1.0 - t * t * (3.0 - 2.0 * t)
+
+
+def discover_rigid_mode(world: np.ndarray, fps: float, window: np.ndarray | None = None) -> tuple[RigidModel, InertiaCheck | None]:
+    """The rigid mode of a plain capture, and its inertia check: the skull's, not a sliding block's, where the data tell.
+
+    world (F, N, 3): the take or an even sample of its frames (estimate_rigidity);
+    window: consecutive frames of the take at ``fps`` (default: world, which must then be
+    consecutive; only its middle WINDOW_SECONDS are used), where the check measures how
+    the rest of the face moves in the mode's frame (facedyn.stabilize.inertia).
+
+    When the rest of the face feeds energy into the mode's motion (a sliding block's
+    frame), discovery starts again from the vertices that lead it most
+    (inertia.skull_seed), and the mode so found replaces the first if the rest of the face
+    is passive in its frame, as in a skull's (not suspect, and fewer vertices feed).
+    On the ICT rig as simulated this finds the bone under the forehead block on walking,
+    running and hopping takes; on its 9 Hz platform, where the head barely moves in the
+    check's band, it cannot (the check stays suspect: stabilize warns).
+    """
+    window = world if window is None else window
+    window = window[middle_window(len(window), fps)]
+    model = estimate_rigidity(world)
+    check, frame = _inertia(model, window, fps)
+    if check is None or not check.suspect:
+        return model, check
+    seed = inertia.skull_seed(window, *frame, model.rest, fps)
+    if seed is None or np.count_nonzero(seed) < MIN_RIGID:
+        return model, check
+    reseeded = estimate_rigidity(world, seed=seed)
+    again, _ = _inertia(reseeded, window, fps)
+    if again is None or again.suspect or again.feeding >= check.feeding:
+        return model, check
+    return reseeded, again
+
+
+def middle_window(frames: int, fps: float) -> slice:
+    """A take's middle WINDOW_SECONDS, where a discovered mode's inertia is checked: bounded cost and memory on long takes."""
+    keep = max(1, int(round(WINDOW_SECONDS * fps)))
+    start = max(0, (frames - keep) // 2)
+    return slice(start, min(frames, start + keep))
+
+
+def _inertia(model: RigidModel, window: np.ndarray, fps: float):
+    """The inertia check of the frame a robust fit on the model's weights gives each window frame, and that frame."""
+    fitted = _strided(np.flatnonzero(model.weights > 0))
+    rot, trans, _ = rigid.robust_icp(window[:, fitted].astype(np.float64), model.rest[fitted], model.weights[fitted],
+                                     iterations=ICP_ITERATIONS)
+    to_world = np.transpose(rot, (0, 2, 1))  # the fit maps world to skull: skull = R world + t
+    frame = (-np.einsum("fij,fj->fi", to_world, trans), quaternion.from_matrix(to_world))
+    return inertia.check_frame(window, *frame, model.rest, np.flatnonzero(model.weights == 0), fps), frame
+
+
+def _strided(vertices: np.ndarray) -> np.ndarray:
+    """At most FIT_VERTICES of the vertices, evenly strided: enough to fit a rigid frame on."""
+    return vertices[np.linspace(0, len(vertices) - 1, min(FIT_VERTICES, len(vertices))).round().astype(int)]
