@@ -101,3 +101,22 @@ def test_dropped_frames_are_filled_from_their_neighbours():
 def test_the_cutoff_is_not_chosen_on_takes_too_short_to_judge():
     paths = np.random.default_rng(3).normal(size=(2 * ORDER, 6))
     assert choose_cutoff(paths, np.ones(len(paths)), FPS) is None
+
+
+def test_a_vibrations_ends_are_as_accurate_as_its_middle():
+    """The motion is predicted past its ends before smoothing (smoothing.extend): seen from one side only, a smoother
+    bends the accelerations of the first and last frames (a clean 9 Hz vibration at a 20 Hz cut-off: 9.5 % error
+    there, 0.3 % in the middle); with the prediction the ends are as accurate as the middle."""
+    translate, orient = skull_to_world(3.0, 9.0, 0.3, 0.05)
+    clean = dualquat.conjugate(dualquat.from_translate_orient(translate, orient))
+    truth = skull_accelerations(translate, orient, LANDMARKS, FPS)
+    ends, middle = np.r_[1:10, len(clean) - 10:len(clean) - 1], np.arange(10, len(clean) - 10)
+
+    def error(world_to_skull, frames):
+        t, o = dualquat.to_translate_orient(dualquat.conjugate(world_to_skull))
+        return float(np.sqrt(np.mean((skull_accelerations(t, o, LANDMARKS, FPS) - truth)[frames] ** 2) / np.mean(truth**2)))
+
+    smoothed, _ = smooth_skull_motion(clean, FPS, REST, cutoff_hz=20.0)
+    unextended, _ = smooth_skull_motion(clean, FPS, REST, cutoff_hz=20.0, extension=0)
+    assert error(smoothed, ends) < 1.5 * error(smoothed, middle) < 0.01
+    assert error(unextended, ends) > 10 * error(unextended, middle)  # what the prediction fixes
