@@ -15,10 +15,15 @@ every load is inertial):
   acceleration, all in skull axes (Euler, Coriolis and centrifugal loads). g(t) is world
   gravity seen from the skull, relative to the first frame's orientation, so a skull held
   still in any pose stays exactly at rest.
-- The expression itself does not force the tissue (y'' is no load): with a still skull
-  the output is y(t) exactly, for any expression sequence, so y is an exact truth.
+- By default the expression itself does not force the tissue (y'' is no load): with a
+  still skull the output is y(t) exactly, for any expression sequence, so y is an exact
+  truth. `expression_inertia` e > 0 adds -M e y''(t): the tissue's own inertia as the
+  expression moves it (passive tissue carries all of it, e = 1; muscles that shape the
+  expression from within carry part of it, so e < 1), the load a fast lip or jaw motion
+  puts on the tissue around it.
 - K(t) = M diag(w_i^2 s_i(t)) + c^2 L: a spring to the bone whose natural frequency w_i
   rises from `soft_hz` (rigid weight 0: cheeks, lips, jowls) to `bone_hz` (weight -> 1),
+  raised where the soft tissue is thinner (`depth_variation`, see TissueParams),
   and a membrane (cotangent Laplacian L of the neutral, c = coupling_cm * 2 pi soft_hz)
   that makes neighbours pull on each other, so offsets are smooth fields.
   s_i(t) = 1 + strain_stiffening * |strain_i(t)| stiffens tissue the expression stretches
@@ -117,6 +122,10 @@ class TissueParams:
     stiffness_variation: float = 0.0
     density_variation: float = 0.0
     layout_seed: int = 0
+    # the soft tissue's depth over the face: exp(-depth_variation * t), t in (0, 1) a smooth
+    # random layout; a shear layer rings as 1 / depth, so the spring frequency rises by exp(depth_variation * t)
+    depth_variation: float = 0.0
+    expression_inertia: float = 0.0  # share of the expression's acceleration y'' that loads the tissue (0..1)
 
     def __post_init__(self) -> None:
         for name in ("soft_hz", "bone_hz", "damping_ratio", "coupling_cm", "refactor_tolerance"):
@@ -125,24 +134,37 @@ class TissueParams:
                 raise ValueError(f"TissueParams.{name} must be positive, got {value}")
         if self.bone_hz < self.soft_hz:
             raise ValueError(f"TissueParams.bone_hz ({self.bone_hz}) must be >= soft_hz ({self.soft_hz})")
-        for name in ("strain_stiffening", "gravity_cm_s2", "stiffness_variation", "density_variation"):
+        for name in ("strain_stiffening", "gravity_cm_s2", "stiffness_variation", "density_variation", "depth_variation"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"TissueParams.{name} must be >= 0, got {value}")
+        if not 0.0 <= self.expression_inertia <= 1.0:
+            raise ValueError(f"TissueParams.expression_inertia must be in [0, 1], got {self.expression_inertia}")
         if int(self.substeps) != self.substeps or self.substeps < 1:
             raise ValueError(f"TissueParams.substeps must be a positive integer, got {self.substeps}")
 
     @classmethod
     def random(cls, seed: int, **overrides) -> "TissueParams":
         """A training actor's tissue drawn from `seed`: soft_hz 5-9 Hz, bone_hz 30-50 Hz,
-        damping ratio 0.15-0.35, coupling 0.6-1.4 cm, strain stiffening 1-6, and spatial
-        layouts of stiffness (log-sd 0.05-0.3) and density (0-0.2). `overrides` replace
-        drawn fields (e.g. substeps)."""
+        damping ratio 0.15-0.35, coupling 0.6-1.4 cm, strain stiffening 1-6, spatial
+        layouts of stiffness (log-sd 0.05-0.3) and density (0-0.2), a depth layout
+        (depth_variation 0-1.6) and expression inertia 0-1. `overrides` replace drawn
+        fields (e.g. substeps).
+
+        Why these two last ranges: facial soft tissue is 1.5-3 cm deep over the cheeks and
+        under the jaw but 0.3-0.6 cm over the brow, nose and chin, so the part of the face
+        that is free of the bone does not ring at one frequency: a shear layer's frequency
+        goes as 1 / depth, up to about 5x (exp(1.6)) the deepest tissue's where it is
+        thin. A uniform soft region (depth_variation 0) is the softest actor the family
+        holds, not its only one. Tissue moved by the expression carries its own inertia
+        unless the muscles that move it hold it (see the module), anything in between.
+        """
         rng = np.random.default_rng([int(seed), 0x746973])  # "tis": another stream than the volumetric draws
         drawn = dict(
             soft_hz=rng.uniform(5.0, 9.0), bone_hz=rng.uniform(30.0, 50.0), damping_ratio=rng.uniform(0.15, 0.35),
             coupling_cm=rng.uniform(0.6, 1.4), strain_stiffening=rng.uniform(1.0, 6.0),
             stiffness_variation=rng.uniform(0.05, 0.3), density_variation=rng.uniform(0.0, 0.2),
+            depth_variation=rng.uniform(0.0, 1.6), expression_inertia=rng.uniform(0.0, 1.0),
         )
         return cls(**{**{k: float(v) for k, v in drawn.items()}, "layout_seed": int(seed), **overrides})
 
@@ -152,10 +174,22 @@ class TissueParams:
         return 2 * self.damping_ratio * w1 * w2 / (w1 + w2), 2 * self.damping_ratio / (w1 + w2)
 
     def attachment_hz(self, rigid_weights: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
-        """Per-vertex spring frequency, geometric from soft_hz (weight 0) to bone_hz (1),
-        times the stiffness layout's factor at the neutral `points` (needed when it varies)."""
-        hz = self.soft_hz * (self.bone_hz / self.soft_hz) ** np.asarray(rigid_weights, dtype=np.float64)
+        """Per-vertex spring frequency, geometric from the soft tissue's (weight 0: soft_hz,
+        raised where the depth layout thins it) to bone_hz (1), times the stiffness
+        layout's factor at the neutral `points` (needed when either layout varies)."""
+        weights = np.asarray(rigid_weights, dtype=np.float64)
+        soft = self.soft_hz * self._thinning(points)
+        hz = soft * (self.bone_hz / soft) ** weights
         return hz * np.sqrt(self._layout(points, "stiffness_variation", layout.STIFFNESS))
+
+    def _thinning(self, points) -> np.ndarray | float:
+        """The soft frequency's factor exp(depth_variation * t), t = (1 + tanh(field)) / 2."""
+        if self.depth_variation == 0:
+            return 1.0
+        if points is None:
+            raise ValueError("TissueParams.depth_variation > 0 needs the neutral points to lay the tissue out over")
+        field = layout.smooth_layout(points, self.layout_seed, layout.DEPTH)
+        return np.exp(self.depth_variation * 0.5 * (1.0 + np.tanh(field)))
 
     def density(self, points: np.ndarray) -> np.ndarray:
         """(N,) relative areal density at the neutral points (1 without a density layout)."""
@@ -387,6 +421,7 @@ class _Tissue:
         self.h = h
         self.mu = h * _GL_LAMBDA
         self.tolerance = params.refactor_tolerance
+        self.inertia = params.expression_inertia
 
     def gravity_sag(self, gain: np.ndarray, turned: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
         """(F, n, 3) static sag s(t) of the free vertices: K(t) s = M (g(t) - g(0)).
@@ -522,6 +557,9 @@ class _Tissue:
         advance, predict = self._state_maps()
         gamma = self.mu**2 * _GL_S
         moving = np.any(gain[1:] != gain[:-1], axis=1)
+        # -e y'' at the stages, linear between the frames' y'': weights of the frame start's and end's
+        inertia = (-self.inertia * gamma * (1 - frac)).sum(1), (-self.inertia * gamma * frac).sum(1)
+        acceleration = _FrameAccelerations(y, None if every else free, fps)
 
         x = np.zeros((n, 22))  # [y_f, dy, u, v, Re w, Im w, M^-1 K u, 1], see _rhs_weights
         x[:, 21] = 1.0
@@ -538,6 +576,8 @@ class _Tissue:
                 y_now, y_next = y_next, (y[f + 1] if every else y[f + 1, free])
                 x[:, :3] = y_now
                 np.subtract(y_next, y_now, out=x[:, 3:6])
+                if self.inertia:
+                    acc_now, acc_next = acceleration(f), acceleration(f + 1)
             drift = 0.0
             if moving[f] or not at_ref:
                 g_now = gain[f, free]
@@ -551,6 +591,8 @@ class _Tissue:
                 at_ref = not moving[f] and not np.any(g_now != gain_ref)
             x[:, 18:21] = stiffness @ u
             np.copyto(parts, (x @ weights[step]).reshape(n, 2, 3).transpose(2, 0, 1))
+            if self.inertia:
+                rhs += inertia[0][step] * acc_now + inertia[1][step] * acc_next
             if drift > 0:  # the stiffness the factorization lacks, where it drifted, at the predicted stages
                 active = np.flatnonzero(reach)
                 stages = x[active, 6:18] @ predict
@@ -568,6 +610,27 @@ class _Tissue:
                 else:
                     out[f + 1, free] = u
         return factorizations
+
+
+class _FrameAccelerations:
+    """y''(f) of the free vertices by central differences of the frames (zero at the ends,
+    as the volumetric layer's), the last two kept: a step asks for frames f and f + 1."""
+
+    def __init__(self, y: np.ndarray, free: np.ndarray | None, fps: float):
+        self.y, self.free, self.fps2, self.cache = y, free, fps * fps, {}
+
+    def _frame(self, f: int) -> np.ndarray:
+        return self.y[f] if self.free is None else self.y[f, self.free]
+
+    def __call__(self, f: int) -> np.ndarray:
+        if f not in self.cache:
+            if f == 0 or f == len(self.y) - 1:
+                value = np.zeros(self._frame(f).shape)
+            else:
+                value = (self._frame(f + 1) - 2.0 * self._frame(f).astype(np.float64) + self._frame(f - 1)) * self.fps2
+            self.cache = {k: v for k, v in self.cache.items() if k >= f - 1}
+            self.cache[f] = value
+        return self.cache[f]
 
 
 @contextmanager

@@ -6,6 +6,8 @@ or motion modules.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -127,6 +129,40 @@ def test_isolated_vertices_match_the_damped_oscillator():
         steady = np.abs(result.offsets[300:, :, 1]).max()
         assert steady == pytest.approx(expected, rel=0.01)
         assert np.abs(result.offsets[300:, :, [0, 2]]).max() < 1e-9 * expected
+
+
+def test_expression_inertia_loads_the_tissue_as_a_moving_base_would():
+    """A rest shape that moves as a whole, still skull: with expression_inertia e its
+    acceleration loads the tissue like a skull moving the other way, e times. y'' is the
+    frames' central difference, the skull's a cubic spline's: for a sinusoid their ratio is
+    (4 + 2 cos wh) / 6."""
+    points, tris, _ = face_patch(n=6)
+    frames, hz = 480, 8.0
+    translate, _ = sinusoid(frames, hz, 0.2)
+    y = held(points, frames) + translate[:, None, :]
+    still = (np.zeros((frames, 3)), quaternion.identity((frames,)))
+    base = TissueParams(coupling_cm=1e-6, strain_stiffening=0.0)
+    moving_skull = simulate(held(points, frames), tris, translate, still[1], FPS, base)
+    difference = (4 + 2 * np.cos(2 * np.pi * hz / FPS)) / 6
+    for e in (0.0, 0.5, 1.0):
+        result = simulate(y, tris, *still, FPS, replace(base, expression_inertia=e))
+        expected = e * difference * np.abs(moving_skull.offsets[300:, :, 1]).max()
+        assert np.abs(result.offsets[300:, :, 1]).max() == pytest.approx(expected, rel=0.01, abs=1e-12)
+        assert np.abs(result.offsets[300:, :, [0, 2]]).max() <= 1e-9 * max(expected, 1.0)
+
+
+def test_thinner_tissue_rings_higher():
+    """depth_variation raises the soft spring frequency by exp(depth_variation * t), t in (0, 1),
+    and leaves bone_hz on the bone."""
+    points, _, weights = face_patch()
+    plain = TissueParams(layout_seed=3)
+    thin = replace(plain, depth_variation=1.2)
+    ratio = thin.attachment_hz(weights, points) / plain.attachment_hz(weights, points)
+    soft = weights == 0
+    assert np.all(ratio[soft] > 1.0) and np.all(ratio[soft] < np.exp(1.2)) and np.ptp(ratio[soft]) > 0.3
+    assert np.allclose(ratio[weights == 1], 1.0)
+    with pytest.raises(ValueError, match="neutral points"):
+        thin.attachment_hz(weights)
 
 
 def test_inertial_loads_match_an_independent_integration():
@@ -452,6 +488,8 @@ def test_bad_input_is_a_clear_error(change, message):
         (dict(substeps=0), "substeps"),
         (dict(substeps=1.5), "substeps"),
         (dict(refactor_tolerance=0.0), "refactor_tolerance"),
+        (dict(depth_variation=-0.5), "depth_variation"),
+        (dict(expression_inertia=1.5), "expression_inertia"),
     ],
 )
 def test_bad_params_are_a_clear_error(params, message):
