@@ -98,6 +98,8 @@ def test_tissue_layouts_vary_the_springs_over_the_face():
     hz = params.attachment_hz(np.zeros(rig.point_count), rig.neutral)
     assert hz.std() > 0.02 * hz.mean()  # not uniform: the stiffness layout
     assert np.all(TissueParams().attachment_hz(np.zeros(3)) == TissueParams().soft_hz)
+    with pytest.raises(ValueError, match="neutral points"):
+        params.attachment_hz(np.zeros(3))
 
 
 def test_random_tissue_covers_thin_stiff_and_anisotropic_actors():
@@ -110,5 +112,3 @@ def test_random_tissue_covers_thin_stiff_and_anisotropic_actors():
         assert values.min() < low + 0.2 * (high - low) and values.max() > high - 0.2 * (high - low)
     default = TissueParams()
     assert default.depth_variation == 0 and default.expression_inertia == 0 and default.normal_ratio == 1
-    with pytest.raises(ValueError, match="neutral points"):
-        params.attachment_hz(np.zeros(3))
