@@ -274,6 +274,9 @@ def simulate(
         turned = skull.gravity_change(orient)
         with single_threaded_blas():
             factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
+            if not np.isfinite(np.sum(offsets, dtype=np.float64)):
+                raise ValueError("the spring tissue diverged: skull accelerations or expression changes too large for the step "
+                                 "(raise substeps or lower refactor_tolerance)")
             if np.any(turned):
                 sag[:, free] = tissue.gravity_sag(gain[:, free], turned)
     points = y + offsets
@@ -501,9 +504,10 @@ class _Tissue:
         lu = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, relax=1,
                        options={"SymmetricMode": True})
         stiffness = (directions.expand(coupling) + directions.springs(spring * gain_ref)).tocsr()
-        stiffest = spring * (1.0 + directions.extra)  # along the normal
-        full = (1 + mu * self.a) + (mu * self.b + mu * mu * gain_ref) * stiffest + (mu * self.b + mu * mu) * coupling.diagonal()
-        return lu, stiffness, np.abs(mu * mu * stiffest) / np.abs(full)
+        # the drift's share of the isotropic diagonal, along the stiffest direction (the normal): the
+        # correction is explicit, so a stiffer normal spring must drift less before refactorizing
+        full = (1 + mu * self.a) + (mu * self.b + mu * mu * gain_ref) * spring + (mu * self.b + mu * mu) * coupling.diagonal()
+        return lu, stiffness, np.abs(mu * mu * spring * (1.0 + directions.extra)) / np.abs(full)
 
     def _step_maps(self):
         """A step's linear maps, each coefficient c acting as 'c v' (real) or '2 Re(c w)':

@@ -413,8 +413,10 @@ def test_one_step_per_frame_agrees_with_finer_steps(patch):
     assert np.abs(runs[2] - runs[8]).max() < 0.005 * scale
 
 
-@pytest.mark.parametrize("normal_ratio", [1.0, 2.5])
-def test_stiffness_drift_correction_matches_refactorizing(patch, normal_ratio):
+@pytest.mark.parametrize("normal_ratio, saving", [(1.0, 5), (2.5, 2), (4.0, 1)])
+def test_stiffness_drift_correction_matches_refactorizing(patch, normal_ratio, saving):
+    """The explicit gain-drift correction stays as accurate as refactorizing every step; a
+    spring stiffer along the normal (160 Hz here on the bone) may drift less, so it saves less."""
     points, tris, weights = patch
     frames = 240
     translate, orient = sinusoid(frames, 8.0, 0.3)
@@ -423,8 +425,7 @@ def test_stiffness_drift_correction_matches_refactorizing(patch, normal_ratio):
     lazy = simulate(y, tris, translate, orient, FPS, strong, rigid_weights=weights, neutral=points)
     eager = simulate(y, tris, translate, orient, FPS, replace(strong, refactor_tolerance=1e-9),
                      rigid_weights=weights, neutral=points)
-    # the drift of a spring stiffer along the normal is measured at its stiffest: more refactorizations
-    assert eager.factorizations > 200 and lazy.factorizations < eager.factorizations / (5 if normal_ratio == 1 else 3)
+    assert eager.factorizations > 200 and lazy.factorizations < eager.factorizations / saving
     assert np.abs(lazy.offsets - eager.offsets).max() < 0.01 * np.abs(eager.offsets).max()
 
 
