@@ -274,7 +274,8 @@ def simulate(
         turned = skull.gravity_change(orient)
         with single_threaded_blas():
             factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
-            if not np.isfinite(np.sum(offsets, dtype=np.float64)):
+            # a deflection beyond the face's own size (or no number at all) is no tissue: the integration diverged
+            if not np.abs(offsets).max() <= np.ptp(neutral, axis=0).max():
                 raise ValueError("the spring tissue diverged: skull accelerations or expression changes too large for the step "
                                  "(raise substeps or lower refactor_tolerance)")
             if np.any(turned):
@@ -612,7 +613,8 @@ class _Tissue:
                 change = gain[f + 1, free] - g_now
                 reach = np.abs(g_now - gain_ref) + frac[step].max() * np.abs(change)
                 drift = float(np.max(sensitivity * reach))
-                if drift > self.tolerance:
+                # a held expression's lasting correction grows on springs stiffer along the normal: refactorize once
+                if drift > self.tolerance or (drift > 0 and self.directions.normals is not None and not moving[f]):
                     gain_ref = g_now + frac[step].mean() * change
                     lu, stiffness, sensitivity = self._factorize(gain_ref)
                     factorizations += 1
