@@ -159,7 +159,7 @@ class TissueParams:
         (depth_variation 0-1.6), expression inertia 0-1 and normal_ratio 1-4. `overrides`
         replace drawn fields (e.g. substeps).
 
-        Why these two last ranges: facial soft tissue is 1.5-3 cm deep over the cheeks and
+        Why the last three ranges: facial soft tissue is 1.5-3 cm deep over the cheeks and
         under the jaw but 0.3-0.6 cm over the brow, nose and chin, so the part of the face
         that is free of the bone does not ring at one frequency: a shear layer's frequency
         goes as 1 / depth, up to about 5x (exp(1.6)) the deepest tissue's where it is
@@ -275,7 +275,7 @@ def simulate(
         with single_threaded_blas():
             factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
             # a deflection beyond the face's own size (or no number at all) is no tissue: the integration diverged
-            if not np.abs(offsets).max() <= np.ptp(neutral, axis=0).max():
+            if not max(offsets.max(), -offsets.min()) <= np.ptp(neutral, axis=0).max():  # no take-sized temporary
                 raise ValueError("the spring tissue diverged: skull accelerations or expression changes too large for the step "
                                  "(raise substeps or lower refactor_tolerance)")
             if np.any(turned):
