@@ -234,7 +234,8 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--actors", type=int, default=2, choices=range(1, len(ACTOR_SEEDS) + 1))
+    parser.add_argument("--actors", type=int, default=2, choices=range(0, len(ACTOR_SEEDS) + 1),
+                        help="volumetric actors of the seeds the training family was tuned against (0: only --held-out-actors)")
     parser.add_argument("--held-out-actors", type=int, default=0, choices=range(0, len(HELD_OUT_SEEDS) + 1),
                         help="volumetric actors from seeds never used while tuning, reported with held_out: true (final figures only)")
     parser.add_argument("--epochs", type=int, default=8, help="epochs of every F variant (equal budgets)")
