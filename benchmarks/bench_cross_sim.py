@@ -47,7 +47,9 @@ on the solved take. One JSON object per case.
 
 A small-budget protocol (demo-scale corpus with the procedural talking takes, no Live Link
 performances, short takes, few epochs): measured on 2 cores partly shared with other jobs,
-training 4.9 minutes and testing two actors 9.6 minutes.
+training 4.9 minutes and testing two actors 9.6 minutes before the round-4 tissue family; its springs
+stiffer along the normal solve 3n coordinates at once, so `synth` took 106 s instead of 27 s
+(both measured under a load of 3-5).
 """
 from __future__ import annotations
 
