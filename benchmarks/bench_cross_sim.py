@@ -26,17 +26,30 @@ no truth, no rest) and go through `import`, `stabilize --actor actor.usda`, `rem
   - a held smile on a 8 Hz platform (training has 7, 9 and 11 Hz);
   - synthesis under new motion: the dialog under CMU 131_03 hopping; H synthesizes the
     dynamics from F's quasistatic output and the solved skull; against the true dynamics.
+Retargeting (A -> B, both volumetric test actors of a group, one topology): A's dialog
+under CMU hopping, captured and processed as above (A's take with its quasistatic layer),
+retargeted onto B's dialog under walking (B's quasistatic layer) with `usdfacedyn retarget`
+(B's synthesis model: the H trained above; and `--method delta-transfer`, A's removed
+offsets copied), scored against B's true dynamics under A's true skull motion (B's tissue
+simulating B's expression under A's motion). Target: synthesis <= 0.5x delta transfer.
+
+Held-out actors (``--held-out-actors K``): volumetric actors from seeds (HELD_OUT_SEEDS)
+that were never simulated while the training family was tuned; their JSON carries
+``"held_out": true``. Run them only for final figures.
+
 Every figure is RMS over the face vertices as a fraction of the true dynamics' RMS
 ("do nothing" = 100%): ``solved`` = the real path (solved skull, actor frame); ``true_skull``
 = F (or H) given the simulator's true skull and the tracked points in true skull space: an
 upper bound, no capture has it; ``moving_average`` = the 21-frame moving average baseline
 on the solved take. One JSON object per case.
 
-    .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--work DIR]
+    .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--held-out-actors 0] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--work DIR]
 
 A small-budget protocol (demo-scale corpus with the procedural talking takes, no Live Link
 performances, short takes, few epochs): measured on 2 cores partly shared with other jobs,
-training 4.9 minutes and testing two actors 9.6 minutes.
+training 4.9 minutes and testing two actors 9.6 minutes before the round-4 tissue family; its springs
+stiffer along the normal solve 3n coordinates at once, so `synth` took 106 s instead of 27 s
+(both measured under a load of 3-5).
 """
 from __future__ import annotations
 
@@ -56,6 +69,7 @@ from facedyn.evaluation import residual_fraction
 from facedyn.geometry import quaternion
 from facedyn.sim.corpus import SPEECH, TakeSpec, simulate_takes
 from facedyn.sim.default_face import default_face
+from facedyn.sim import volumetric
 from facedyn.sim.noise import TrackerNoise, add_tracker_noise
 from facedyn.sim.volumetric import VolumetricParams
 from plain_capture import usdfacedyn, write_plain_cache
@@ -63,6 +77,7 @@ from plain_capture import usdfacedyn, write_plain_cache
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TRACKER = TrackerNoise(iid_cm=0.01, temporal_cm=0.004, spatial_cm=0.002, pop_rate=1.0, pop_cm=0.3, drop_rate=0.01)
 ACTOR_SEEDS = (1801, 1802, 1803, 1804)  # VolumetricParams.random seeds: no training take draws volumetric tissue
+HELD_OUT_SEEDS = (1901, 1902, 1903, 1904)  # never simulated while the training family was tuned (final figures only)
 TEST_SPEECH_TAKES = "dialog_walk,dialog_hop"  # the corpus's Live Link takes of the test takes' speech
 RECOMMENDED_INPUTS = ("--sample-positions", "true", "--batch-size", "2000", "--exclude", TEST_SPEECH_TAKES)
 F_VARIANTS = {  # name: (train-removal --target, --skull-features, its other flags)
@@ -121,8 +136,9 @@ class TestTake:
         # the tracked points in the true skull's space (for the upper bound)
         self.tracked_true_skull = np.einsum("fji,fnj->fni", rot, tracked.points - sim.skull_translate[:, None]).astype(np.float32)
         folder.mkdir(parents=True)
+        self.root = folder / "take.usda"
         write_plain_cache(folder / "tracked.usdc", tracked.points, rig.topology.face_vertex_counts, rig.topology.face_vertex_indices, fps)
-        root = folder / "take.usda"
+        root = self.root
         usdfacedyn("import", str(folder / "tracked.usdc"), "-o", str(folder / "capture.usdc"))
         usdfacedyn("stabilize", str(root), "-o", str(folder / "stabilized.usdc"), "--attach", str(root), "--actor", str(actor))
         self.stabilized, _ = read_take(root)
@@ -166,9 +182,64 @@ def synthesis_case(actor_name: str, take: TestTake, h_model, fv) -> dict:
             "H_true_skull_true_quasistatic_upper_bound": score(upper, truth, fv)}
 
 
+def retarget_case(source: tuple[str, TestTake], target: tuple[str, VolumetricParams, TestTake], rig, models: Path, h_model, fv) -> dict:
+    """A's capture retargeted onto B's quasistatic performance (the console's retarget, both
+    methods), against B's tissue under A's true skull motion with B's own expression."""
+    (a_name, a), (b_name, b_params, b) = source, target
+    y_b = rig.evaluate(b.truth.weights)
+    truth_sim = volumetric.simulate(y_b, rig.topology.triangles(), a.truth.skull_translate, a.truth.skull_orient, a.truth.fps, b_params,
+                                    rigid_weights=rig.rigid_weights, neutral=rig.neutral)
+    truth = truth_sim.dynamics.astype(np.float32)
+    folder = b.root.parent
+    scores = {}
+    for method, flags in (("synthesis", ("--model", str(models / "H.synthesis"))), ("delta_transfer", ("--method", "delta-transfer"))):
+        layer = folder / f"retargeted.{method}.usdc"
+        usdfacedyn("retarget", str(b.root), "--source", str(a.root), "-o", str(layer), *flags)
+        scores[method] = score(read_layers_offsets(layer, b.root), truth, fv)
+    quasistatic = (y_b + truth_sim.gravity_sag).astype(np.float32)
+    _, upper = synthesize_dynamics(quasistatic, a.truth.skull_translate, a.truth.skull_orient, a.truth.fps, h_model)
+    return {"case": "retargeting A -> B (A: dialog under CMU 131_03 hop; B: its dialog under CMU 131_02 walk)", "source_actor": a_name,
+            "target_actor": b_name, "frames": len(truth),
+            "dynamics_rms_mm": round(residual_fraction(truth, truth, truth, fv)["dynamics_rms_cm"] * 10, 3),
+            "no_dynamics": 1.0, "H_solved": scores["synthesis"], "delta_transfer_solved": scores["delta_transfer"],
+            "ratio_to_delta_transfer": round(scores["synthesis"] / scores["delta_transfer"], 3),
+            "delta_transfer_true_offsets_upper_bound": score(a.truth.offsets, truth, fv),
+            "H_true_skull_true_quasistatic_upper_bound": score(upper, truth, fv)}
+
+
+def read_layers_offsets(layer: Path, root: Path) -> np.ndarray:
+    from facedyn.usd.take import read_layers
+
+    return read_layers([layer, root]).offsets
+
+
+def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path, models: dict, h_model, args, started: float) -> tuple[str, VolumetricParams, dict]:
+    """One volumetric actor's test takes through the console, and its cases; (name, tissue, takes)."""
+    fv = rig.face_vertices
+    params = VolumetricParams.random(seed, substeps=2)  # one step per frame diverges on CMU hopping for some actors
+    actor_name = f"volumetric_{seed}"
+    tag = {"held_out": True} if held_out else {}
+    emit(case="test actor", actor=actor_name, simulator="facedyn.sim.volumetric", **tag, soft_hz=round(params.soft_hz, 2),
+         damping_ratio=round(params.damping_ratio, 3), thickness_cm=round(params.thickness_cm, 2), nonlinearity=round(params.nonlinearity, 2))
+    specs = test_specs(args.seconds, (6000 if held_out else 5000) + 10 * k)
+    t0 = time.perf_counter()
+    sims = dict(zip(specs, simulate_takes(rig, list(specs.values()), params, jobs=args.jobs)))
+    simulated = time.perf_counter() - t0
+    tests = scratch / actor_name  # test takes are never kept: a rerun simulates them afresh
+    takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work) for label, sim in sims.items()}
+    for label in ("dialog_walk", "dialog_run", "platform_8hz"):
+        emit(**removal_case(actor_name, label, takes[label], models, fv), **tag)
+    emit(**synthesis_case(actor_name, takes["dialog_hop"], h_model, fv), **tag)
+    emit(case="test timing", actor=actor_name, **tag, simulate_seconds=round(simulated, 1), total_seconds=round(time.perf_counter() - started, 1))
+    return actor_name, params, takes
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--actors", type=int, default=2, choices=range(1, len(ACTOR_SEEDS) + 1))
+    parser.add_argument("--actors", type=int, default=2, choices=range(0, len(ACTOR_SEEDS) + 1),
+                        help="volumetric actors of the seeds the training family was tuned against (0: only --held-out-actors)")
+    parser.add_argument("--held-out-actors", type=int, default=0, choices=range(0, len(HELD_OUT_SEEDS) + 1),
+                        help="volumetric actors from seeds never used while tuning, reported with held_out: true (final figures only)")
     parser.add_argument("--epochs", type=int, default=8, help="epochs of every F variant (equal budgets)")
     parser.add_argument("--subsample", type=float, default=0.5, help="fraction of pairs per epoch, every F variant")
     parser.add_argument("--h-epochs", type=int, default=20)
@@ -199,21 +270,12 @@ def main() -> None:
              h_epochs=args.h_epochs, seconds=seconds, budget="every F variant: the same epochs and subsample fraction; the paper's F without the talking takes")
         models = {name: load_model(work / f"{name}.removal") for name in F_VARIANTS}
         h_model = load_model(work / "H.synthesis")
-        for k, seed in enumerate(ACTOR_SEEDS[: args.actors]):
-            params = VolumetricParams.random(seed, substeps=2)  # one step per frame diverges on CMU hopping for some actors
-            actor_name = f"volumetric_{seed}"
-            emit(case="test actor", actor=actor_name, simulator="facedyn.sim.volumetric", soft_hz=round(params.soft_hz, 2),
-                 damping_ratio=round(params.damping_ratio, 3), thickness_cm=round(params.thickness_cm, 2), nonlinearity=round(params.nonlinearity, 2))
-            specs = test_specs(args.seconds, 5000 + 10 * k)
-            t0 = time.perf_counter()
-            sims = dict(zip(specs, simulate_takes(rig, list(specs.values()), params, jobs=args.jobs)))
-            simulated = time.perf_counter() - t0
-            tests = Path(scratch) / actor_name  # test takes are never kept: a rerun simulates them afresh
-            takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work) for label, sim in sims.items()}
-            for label in ("dialog_walk", "dialog_run", "platform_8hz"):
-                emit(**removal_case(actor_name, label, takes[label], models, fv))
-            emit(**synthesis_case(actor_name, takes["dialog_hop"], h_model, fv))
-            emit(case="test timing", actor=actor_name, simulate_seconds=round(simulated, 1), total_seconds=round(time.perf_counter() - started, 1))
+        groups = [(False, ACTOR_SEEDS[: args.actors]), (True, HELD_OUT_SEEDS[: args.held_out_actors])]
+        for held_out, seeds in groups:
+            actors = [run_actor(seed, k, held_out, rig, work, Path(scratch), models, h_model, args, started) for k, seed in enumerate(seeds)]
+            for (a_name, _, a_takes), (b_name, b_params, b_takes) in zip(actors[:-1], actors[1:]):
+                emit(**retarget_case((a_name, a_takes["dialog_hop"]), (b_name, b_params, b_takes["dialog_walk"]), rig, work, h_model, fv),
+                     **({"held_out": True} if held_out else {}))
 
 
 if __name__ == "__main__":

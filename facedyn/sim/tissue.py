@@ -15,12 +15,20 @@ every load is inertial):
   acceleration, all in skull axes (Euler, Coriolis and centrifugal loads). g(t) is world
   gravity seen from the skull, relative to the first frame's orientation, so a skull held
   still in any pose stays exactly at rest.
-- The expression itself does not force the tissue (y'' is no load): with a still skull
-  the output is y(t) exactly, for any expression sequence, so y is an exact truth.
-- K(t) = M diag(w_i^2 s_i(t)) + c^2 L: a spring to the bone whose natural frequency w_i
+- By default the expression itself does not force the tissue (y'' is no load): with a
+  still skull the output is y(t) exactly, for any expression sequence, so y is an exact
+  truth. `expression_inertia` e > 0 adds -M e y''(t): the tissue's own inertia as the
+  expression moves it (passive tissue carries all of it, e = 1; muscles that shape the
+  expression from within carry part of it, so e < 1), the load a fast lip or jaw motion
+  puts on the tissue around it.
+- K(t) = M diag(w_i^2 s_i(t) A_i) + c^2 L: a spring to the bone whose natural frequency w_i
   rises from `soft_hz` (rigid weight 0: cheeks, lips, jowls) to `bone_hz` (weight -> 1),
+  raised where the soft tissue is thinner (`depth_variation`, see TissueParams),
   and a membrane (cotangent Laplacian L of the neutral, c = coupling_cm * 2 pi soft_hz)
   that makes neighbours pull on each other, so offsets are smooth fields.
+  A_i = I + (normal_ratio^2 - 1) n_i n_i^T makes the spring stiffer along the neutral's
+  normal n_i (tissue is nearly incompressible: pushing the skin into it is harder than
+  shearing it along the bone; normal_ratio 1 is the isotropic spring).
   s_i(t) = 1 + strain_stiffening * |strain_i(t)| stiffens tissue the expression stretches
   or compresses (mean |l / l_neutral - 1| over the vertex's edges), so one skull motion
   jiggles differently under different expressions. Weight-1 vertices are held at y(t).
@@ -37,7 +45,9 @@ by motion, the truth that removal and synthesis are measured against.
 Integration: two-stage Gauss-Legendre (implicit, A-stable, fourth order), so one step per
 120 fps frame agrees with eight to within about 1 % even at 11 Hz. The eigenvectors of its
 Butcher matrix decouple the stage equations into one complex sparse system
-(M + mu C + mu^2 K) w = rhs per step, factorized once and reused. The expression-dependent
+(M + mu C + mu^2 K) w = rhs per step, factorized once and reused (one system of the
+vertices for x, y and z alike when the springs are isotropic, one of all 3n coordinates
+when normal_ratio > 1). The expression-dependent
 part of K and the u-dependent fictitious loads enter the right-hand side at stage values
 predicted from the previous step; the matrix is refactorized only when the stiffness drift
 would change its diagonal by more than `refactor_tolerance` (relative). A still skull
@@ -117,6 +127,11 @@ class TissueParams:
     stiffness_variation: float = 0.0
     density_variation: float = 0.0
     layout_seed: int = 0
+    # the soft tissue's depth over the face: exp(-depth_variation * t), t in (0, 1) a smooth
+    # random layout; a shear layer rings as 1 / depth, so the spring frequency rises by exp(depth_variation * t)
+    depth_variation: float = 0.0
+    expression_inertia: float = 0.0  # share of the expression's acceleration y'' that loads the tissue (0..1)
+    normal_ratio: float = 1.0  # bone spring frequency along the neutral's normal / along the skin (>= 1)
 
     def __post_init__(self) -> None:
         for name in ("soft_hz", "bone_hz", "damping_ratio", "coupling_cm", "refactor_tolerance"):
@@ -125,24 +140,44 @@ class TissueParams:
                 raise ValueError(f"TissueParams.{name} must be positive, got {value}")
         if self.bone_hz < self.soft_hz:
             raise ValueError(f"TissueParams.bone_hz ({self.bone_hz}) must be >= soft_hz ({self.soft_hz})")
-        for name in ("strain_stiffening", "gravity_cm_s2", "stiffness_variation", "density_variation"):
+        for name in ("strain_stiffening", "gravity_cm_s2", "stiffness_variation", "density_variation", "depth_variation"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"TissueParams.{name} must be >= 0, got {value}")
+        if not np.isfinite(self.normal_ratio) or self.normal_ratio < 1.0:
+            raise ValueError(f"TissueParams.normal_ratio must be >= 1, got {self.normal_ratio}")
+        if not 0.0 <= self.expression_inertia <= 1.0:
+            raise ValueError(f"TissueParams.expression_inertia must be in [0, 1], got {self.expression_inertia}")
         if int(self.substeps) != self.substeps or self.substeps < 1:
             raise ValueError(f"TissueParams.substeps must be a positive integer, got {self.substeps}")
 
     @classmethod
     def random(cls, seed: int, **overrides) -> "TissueParams":
         """A training actor's tissue drawn from `seed`: soft_hz 5-9 Hz, bone_hz 30-50 Hz,
-        damping ratio 0.15-0.35, coupling 0.6-1.4 cm, strain stiffening 1-6, and spatial
-        layouts of stiffness (log-sd 0.05-0.3) and density (0-0.2). `overrides` replace
-        drawn fields (e.g. substeps)."""
+        damping ratio 0.15-0.35, coupling 0.6-1.4 cm, strain stiffening 1-6, spatial
+        layouts of stiffness (log-sd 0.05-0.3) and density (0-0.2), a depth layout
+        (depth_variation 0-1.6), expression inertia 0-1 and normal_ratio 1-4. `overrides`
+        replace drawn fields (e.g. substeps).
+
+        Why the last three ranges: facial soft tissue is 1.5-3 cm deep over the cheeks and
+        under the jaw but 0.3-0.6 cm over the brow, nose and chin, so the part of the face
+        that is free of the bone does not ring at one frequency: a shear layer's frequency
+        goes as 1 / depth, up to about 5x (exp(1.6)) the deepest tissue's where it is
+        thin. A uniform soft region (depth_variation 0) is the softest actor the family
+        holds, not its only one. Tissue moved by the expression carries its own inertia
+        unless the muscles that move it hold it (see the module), anything in between.
+        Soft tissue is nearly incompressible (Poisson's ratio 0.45-0.5): a layer's
+        compression mode rings sqrt(2 (1 - nu) / (1 - 2 nu)) = 3.3x (nu = 0.45) or more
+        above its shear mode, less where fat bulges sideways, so the skin moves along the
+        bone more than into it: normal_ratio 1 (isotropic) to 4.
+        """
         rng = np.random.default_rng([int(seed), 0x746973])  # "tis": another stream than the volumetric draws
         drawn = dict(
             soft_hz=rng.uniform(5.0, 9.0), bone_hz=rng.uniform(30.0, 50.0), damping_ratio=rng.uniform(0.15, 0.35),
             coupling_cm=rng.uniform(0.6, 1.4), strain_stiffening=rng.uniform(1.0, 6.0),
             stiffness_variation=rng.uniform(0.05, 0.3), density_variation=rng.uniform(0.0, 0.2),
+            depth_variation=rng.uniform(0.0, 1.6), expression_inertia=rng.uniform(0.0, 1.0),
+            normal_ratio=rng.uniform(1.0, 4.0),
         )
         return cls(**{**{k: float(v) for k, v in drawn.items()}, "layout_seed": int(seed), **overrides})
 
@@ -152,10 +187,22 @@ class TissueParams:
         return 2 * self.damping_ratio * w1 * w2 / (w1 + w2), 2 * self.damping_ratio / (w1 + w2)
 
     def attachment_hz(self, rigid_weights: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
-        """Per-vertex spring frequency, geometric from soft_hz (weight 0) to bone_hz (1),
-        times the stiffness layout's factor at the neutral `points` (needed when it varies)."""
-        hz = self.soft_hz * (self.bone_hz / self.soft_hz) ** np.asarray(rigid_weights, dtype=np.float64)
+        """Per-vertex spring frequency, geometric from the soft tissue's (weight 0: soft_hz,
+        raised where the depth layout thins it) to bone_hz (1), times the stiffness
+        layout's factor at the neutral `points` (needed when either layout varies)."""
+        weights = np.asarray(rigid_weights, dtype=np.float64)
+        soft = self.soft_hz * self._thinning(points)
+        hz = soft * (self.bone_hz / soft) ** weights
         return hz * np.sqrt(self._layout(points, "stiffness_variation", layout.STIFFNESS))
+
+    def _thinning(self, points) -> np.ndarray | float:
+        """The soft frequency's factor exp(depth_variation * t), t = (1 + tanh(field)) / 2."""
+        if self.depth_variation == 0:
+            return 1.0
+        if points is None:
+            raise ValueError("TissueParams.depth_variation > 0 needs the neutral points to lay the tissue out over")
+        field = layout.smooth_layout(points, self.layout_seed, layout.DEPTH)
+        return np.exp(self.depth_variation * 0.5 * (1.0 + np.tanh(field)))
 
     def density(self, points: np.ndarray) -> np.ndarray:
         """(N,) relative areal density at the neutral points (1 without a density layout)."""
@@ -227,6 +274,10 @@ def simulate(
         turned = skull.gravity_change(orient)
         with single_threaded_blas():
             factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
+            # a deflection beyond the face's own size (or no number at all) is no tissue: the integration diverged
+            if not max(offsets.max(), -offsets.min()) <= np.ptp(neutral, axis=0).max():  # no take-sized temporary
+                raise ValueError("the spring tissue diverged: skull accelerations or expression changes too large for the step "
+                                 "(raise substeps or lower refactor_tolerance)")
             if np.any(turned):
                 sag[:, free] = tissue.gravity_sag(gain[:, free], turned)
     points = y + offsets
@@ -382,18 +433,22 @@ class _Tissue:
         self.free = free
         self.mass = mass[free]
         self.spring = (2 * np.pi * hz) ** 2  # w_i^2
+        along = vertex_normals(neutral, tri)[free] if params.normal_ratio > 1 else None
+        self.directions = _Directions(along, params.normal_ratio**2 - 1.0)
         self.membrane = ((params.coupling_cm * 2 * np.pi * params.soft_hz) ** 2 * lap).tocsr()
         self.a, self.b = params.rayleigh()
         self.h = h
         self.mu = h * _GL_LAMBDA
         self.tolerance = params.refactor_tolerance
+        self.inertia = params.expression_inertia
 
     def gravity_sag(self, gain: np.ndarray, turned: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
         """(F, n, 3) static sag s(t) of the free vertices: K(t) s = M (g(t) - g(0)).
 
-        K(t) = M diag(w^2 gain(t)) + c^2 L scales the same in x, y and z, so s(t) =
-        phi(t) (g(t) - g(0)) with K(t) phi = M 1, one scalar field per distinct gain row
-        (a held expression has one). Rows go through in time order, SAG_BLOCK at a time
+        With isotropic springs K(t) = M diag(w^2 gain(t)) + c^2 L scales the same in x, y
+        and z, so s(t) = phi(t) (g(t) - g(0)) with K(t) phi = M 1, one scalar field per
+        distinct gain row (a held expression has one); with springs stiffer along the
+        normal, three fields per row, one per axis of g. Rows go through in time order, SAG_BLOCK at a time
         (SuperLU's solves slow down sharply with many right-hand sides): conjugate
         gradients preconditioned with K factorized at the block's mean gain, which
         consecutive frames stay close to (K is SPD; only its diagonal follows the
@@ -404,47 +459,56 @@ class _Tissue:
         rank = np.empty_like(order)
         rank[order] = np.arange(len(order))
         rows = gain[np.sort(first)]
+        row_of_frame = rank[which.ravel()]
         base = self.mass * self.spring
-        phi = np.empty((len(rows), len(base)))
+        directions = self.directions
+        out = np.empty((len(gain), len(base), 3))
         limit = tolerance * np.linalg.norm(self.mass)
         for a in range(0, len(rows), SAG_BLOCK):
             block = rows[a:a + SAG_BLOCK]
             reference = block.mean(axis=0)
-            matrix = (sp.diags(base * reference) + self.membrane).tocsc()
-            lu = spla.splu(matrix)
-            stiffer = (base[None, :] * (block - reference)).T  # (n, G): the diagonal beyond the reference
-            b = np.repeat(self.mass[:, None], len(block), axis=1)
+            matrix = (directions.springs(base * reference) + directions.expand(self.membrane)).tocsc()
+            lu = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})  # SPD
+            beyond = (base[None, :] * (block - reference)).T  # (n, G): the springs beyond the reference
+
+            def stiffer(x):
+                return directions.scale(beyond, x)
+
+            b = directions.unit_loads(self.mass, len(block))
             x = lu.solve(b)
-            r = b - (matrix @ x + stiffer * x)
+            r = b - (matrix @ x + stiffer(x))
             z = lu.solve(r)
             p, rz = z.copy(), np.sum(r * z, axis=0)
             for _ in range(200):
                 if np.sqrt(np.sum(r * r, axis=0)).max() <= limit:
                     break
-                q = matrix @ p + stiffer * p
+                q = matrix @ p + stiffer(p)
                 alpha = rz / np.sum(p * q, axis=0)
                 x += alpha * p
                 r -= alpha * q
                 z = lu.solve(r)
                 rz, previous = np.sum(r * z, axis=0), rz
                 p = z + (rz / previous) * p
-            phi[a:a + len(block)] = x.T
-        return phi[rank[which.ravel()]][:, :, None] * turned[:, None, :]
+            frames = np.flatnonzero((row_of_frame >= a) & (row_of_frame < a + len(block)))
+            out[frames] = directions.sag(x, row_of_frame[frames] - a, turned[frames])
+        return out
 
     def _factorize(self, gain_ref: np.ndarray):
         """At gain_ref: LU of M^-1 (M + mu C + mu^2 K), M^-1 K, and each vertex's
         sensitivity to gain drift (the share of its diagonal that the gain scales).
         Dividing by the masses saves a product per step; the sparsity stays symmetric."""
-        mu, spring, scale = self.mu, self.spring, sp.diags(1.0 / self.mass)
-        diag = (1 + mu * self.a) + (mu * self.b + mu * mu * gain_ref) * spring
+        mu, spring, scale, directions = self.mu, self.spring, sp.diags(1.0 / self.mass), self.directions
         coupling = scale @ self.membrane
-        matrix = (sp.diags(diag) + (mu * self.b + mu * mu) * coupling).tocsc()
+        matrix = (directions.identity(len(spring)) * (1 + mu * self.a) + directions.springs((mu * self.b + mu * mu * gain_ref) * spring)
+                  + (mu * self.b + mu * mu) * directions.expand(coupling)).tocsc()
         # relax=1 (no padded supernodes): the padding costs the 3-column solves ~15 %
         lu = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, relax=1,
                        options={"SymmetricMode": True})
-        stiffness = (coupling + sp.diags(spring * gain_ref)).tocsr()
-        full = diag + (mu * self.b + mu * mu) * coupling.diagonal()
-        return lu, stiffness, np.abs(mu * mu * spring) / np.abs(full)
+        stiffness = (directions.expand(coupling) + directions.springs(spring * gain_ref)).tocsr()
+        # the drift's share of the isotropic diagonal, along the stiffest direction (the normal): the
+        # correction is explicit, so a stiffer normal spring must drift less before refactorizing
+        full = (1 + mu * self.a) + (mu * self.b + mu * mu * gain_ref) * spring + (mu * self.b + mu * mu) * coupling.diagonal()
+        return lu, stiffness, np.abs(mu * mu * spring * (1.0 + directions.extra)) / np.abs(full)
 
     def _step_maps(self):
         """A step's linear maps, each coefficient c acting as 'c v' (real) or '2 Re(c w)':
@@ -522,6 +586,9 @@ class _Tissue:
         advance, predict = self._state_maps()
         gamma = self.mu**2 * _GL_S
         moving = np.any(gain[1:] != gain[:-1], axis=1)
+        # -e y'' at the stages, linear between the frames' y'': weights of the frame start's and end's
+        inertia = (-self.inertia * gamma * (1 - frac)).sum(1), (-self.inertia * gamma * frac).sum(1)
+        acceleration = _FrameAccelerations(y, None if every else free, fps)
 
         x = np.zeros((n, 22))  # [y_f, dy, u, v, Re w, Im w, M^-1 K u, 1], see _rhs_weights
         x[:, 21] = 1.0
@@ -538,28 +605,33 @@ class _Tissue:
                 y_now, y_next = y_next, (y[f + 1] if every else y[f + 1, free])
                 x[:, :3] = y_now
                 np.subtract(y_next, y_now, out=x[:, 3:6])
+                if self.inertia:
+                    acc_now, acc_next = acceleration(f), acceleration(f + 1)
             drift = 0.0
             if moving[f] or not at_ref:
                 g_now = gain[f, free]
                 change = gain[f + 1, free] - g_now
                 reach = np.abs(g_now - gain_ref) + frac[step].max() * np.abs(change)
                 drift = float(np.max(sensitivity * reach))
-                if drift > self.tolerance:
+                # a held expression's lasting correction grows on springs stiffer along the normal: refactorize once
+                if drift > self.tolerance or (drift > 0 and self.directions.normals is not None and not moving[f]):
                     gain_ref = g_now + frac[step].mean() * change
                     lu, stiffness, sensitivity = self._factorize(gain_ref)
                     factorizations += 1
                 at_ref = not moving[f] and not np.any(g_now != gain_ref)
-            x[:, 18:21] = stiffness @ u
+            x[:, 18:21] = self.directions.apply(stiffness, u)
             np.copyto(parts, (x @ weights[step]).reshape(n, 2, 3).transpose(2, 0, 1))
+            if self.inertia:
+                rhs += inertia[0][step] * acc_now + inertia[1][step] * acc_next
             if drift > 0:  # the stiffness the factorization lacks, where it drifted, at the predicted stages
                 active = np.flatnonzero(reach)
                 stages = x[active, 6:18] @ predict
                 pull = -self.spring[active] * (g_now - gain_ref)[active]
                 slope = -self.spring[active] * change[active]
-                extra = sum(gamma[j] * (pull + frac[step, j] * slope)[:, None] * stages[:, 3 * j:3 * j + 3]
+                extra = sum(self.directions.oriented(gamma[j] * (pull + frac[step, j] * slope), stages[:, 3 * j:3 * j + 3], active)
                             for j in range(2))
                 rhs[active] += extra
-            w = lu.solve(rhs)
+            w = self.directions.apply(lu.solve, rhs)
             x[:, 12:15], x[:, 15:18] = w.real, w.imag
             x[:, 6:12] = x[:, 6:18] @ advance
             if (step + 1) % substeps == 0:
@@ -568,6 +640,105 @@ class _Tissue:
                 else:
                     out[f + 1, free] = u
         return factorizations
+
+
+class _Directions:
+    """How the bone springs act on x, y and z: alike (isotropic: every operator is one of the
+    n vertices, applied to the three coordinates as columns) or stiffer along each vertex's
+    normal by 1 + extra (A_i = I + extra n_i n_i^T: operators of all 3n coordinates, vertex-major)."""
+
+    def __init__(self, normals: np.ndarray | None, extra: float):
+        self.normals = normals  # (n, 3) unit normals, None when isotropic
+        self.extra = extra if normals is not None else 0.0
+
+    def identity(self, count: int) -> sp.spmatrix:
+        return sp.identity(count if self.normals is None else 3 * count, format="csr")
+
+    def expand(self, matrix: sp.spmatrix) -> sp.spmatrix:
+        """A coupling between vertices (the membrane) acting on every coordinate alike."""
+        return matrix if self.normals is None else sp.kron(matrix, sp.identity(3), format="csr")
+
+    def springs(self, values: np.ndarray) -> sp.spmatrix:
+        """diag(values_i A_i): springs of strength values_i per vertex."""
+        if self.normals is None:
+            return sp.diags(values)
+        count = len(values)
+        blocks = values[:, None, None] * (np.eye(3) + self.extra * self.normals[:, :, None] * self.normals[:, None, :])
+        index = 3 * np.arange(count)[:, None, None] + np.arange(3)
+        rows, cols = np.broadcast_to(np.swapaxes(index, 1, 2), blocks.shape), np.broadcast_to(index, blocks.shape)
+        return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * count, 3 * count))
+
+    def apply(self, operator, vectors: np.ndarray) -> np.ndarray:
+        """operator (a matrix or a solve) on (n, 3) per-vertex vectors."""
+        apply = operator if callable(operator) else operator.__matmul__
+        return apply(vectors) if self.normals is None else apply(vectors.reshape(-1)).reshape(vectors.shape)
+
+    def oriented(self, values: np.ndarray, vectors: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+        """values_i A_i v_i for (m,) values and (m, 3) vectors at `vertices`."""
+        if self.normals is None:
+            return values[:, None] * vectors
+        n = self.normals[vertices]
+        return values[:, None] * (vectors + self.extra * n * np.sum(n * vectors, axis=1, keepdims=True))
+
+    def unit_loads(self, mass: np.ndarray, groups: int) -> np.ndarray:
+        """Right-hand sides M 1 per group: (n, G), or (3n, 3G) with one column per group and axis."""
+        if self.normals is None:
+            return np.repeat(mass[:, None], groups, axis=1)
+        loads = np.zeros((len(mass), 3, groups, 3))
+        for axis in range(3):
+            loads[:, axis, :, axis] = mass[:, None]
+        return loads.reshape(3 * len(mass), 3 * groups)
+
+    def scale(self, values: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """values[i, g] A_i applied to the columns of group g of x (laid out as `unit_loads`)."""
+        if self.normals is None:
+            return values * x
+        count, groups = values.shape
+        x4 = x.reshape(count, 3, groups, 3)
+        along = np.einsum("ia,iagc->igc", self.normals, x4)
+        return (values[:, None, :, None] * (x4 + self.extra * self.normals[:, :, None, None] * along[:, None])).reshape(x.shape)
+
+    def sag(self, x: np.ndarray, groups: np.ndarray, turned: np.ndarray) -> np.ndarray:
+        """(F', n, 3) sag of frames whose gain rows are `groups`, from the unit-load responses x."""
+        if self.normals is None:
+            return x.T[groups][:, :, None] * turned[:, None, :]
+        count = x.shape[0] // 3
+        x4 = x.reshape(count, 3, -1, 3)
+        return np.einsum("iafc,fc->fia", x4[:, :, groups], turned)
+
+
+def vertex_normals(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(..., V, 3) area-weighted unit vertex normals of (..., V, 3) points; the triangles'
+    winding decides the side."""
+    tri = np.asarray(triangles)
+    flat = np.asarray(points).reshape((-1,) + np.shape(points)[-2:])
+    face = np.cross(flat[:, tri[:, 1]] - flat[:, tri[:, 0]], flat[:, tri[:, 2]] - flat[:, tri[:, 0]])
+    normals = np.zeros_like(flat)
+    for k in range(3):
+        np.add.at(normals, (slice(None), tri[:, k]), face)
+    normals /= np.maximum(np.linalg.norm(normals, axis=2, keepdims=True), 1e-300)
+    return normals.reshape(np.shape(points))
+
+
+class _FrameAccelerations:
+    """y''(f) of the free vertices by central differences of the frames (zero at the ends,
+    as the volumetric layer's), the last two kept: a step asks for frames f and f + 1."""
+
+    def __init__(self, y: np.ndarray, free: np.ndarray | None, fps: float):
+        self.y, self.free, self.fps2, self.cache = y, free, fps * fps, {}
+
+    def _frame(self, f: int) -> np.ndarray:
+        return self.y[f] if self.free is None else self.y[f, self.free]
+
+    def __call__(self, f: int) -> np.ndarray:
+        if f not in self.cache:
+            if f == 0 or f == len(self.y) - 1:
+                value = np.zeros(self._frame(f).shape)
+            else:
+                value = (self._frame(f + 1) - 2.0 * self._frame(f).astype(np.float64) + self._frame(f - 1)) * self.fps2
+            self.cache = {k: v for k, v in self.cache.items() if k >= f - 1}
+            self.cache[f] = value
+        return self.cache[f]
 
 
 @contextmanager

@@ -100,3 +100,15 @@ def test_tissue_layouts_vary_the_springs_over_the_face():
     assert np.all(TissueParams().attachment_hz(np.zeros(3)) == TissueParams().soft_hz)
     with pytest.raises(ValueError, match="neutral points"):
         params.attachment_hz(np.zeros(3))
+
+
+def test_random_tissue_covers_thin_stiff_and_anisotropic_actors():
+    """TissueParams.random's documented ranges, each reached across seeds; the defaults stay
+    the isotropic, uniform-depth tissue without expression inertia."""
+    draws = [TissueParams.random(seed) for seed in range(60)]
+    for name, low, high in (("depth_variation", 0.0, 1.6), ("expression_inertia", 0.0, 1.0), ("normal_ratio", 1.0, 4.0)):
+        values = np.array([getattr(d, name) for d in draws])
+        assert values.min() >= low and values.max() <= high
+        assert values.min() < low + 0.2 * (high - low) and values.max() > high - 0.2 * (high - low)
+    default = TissueParams()
+    assert default.depth_variation == 0 and default.expression_inertia == 0 and default.normal_ratio == 1
