@@ -413,8 +413,8 @@ class Layer:
                 if np.abs(step).max() <= self.params.tolerance_cm:
                     break
             if not np.isfinite(sag).all():  # no sag, not a silent NaN truth
-                raise ValueError(f"the volumetric tissue's gravity sag diverged at frame {f}: the expression or the "
-                                 "head's turn tears the layer (raise substeps, or a thicker or stiffer tissue)")
+                raise ValueError(f"the volumetric tissue's gravity sag diverged at frame {f}: no static equilibrium "
+                                 "found for this pose and turn of the head")
             out[f, self.skin] = sag[self.dof[self.skin]]
         return out
 
