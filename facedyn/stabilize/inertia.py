@@ -24,8 +24,9 @@ the discovered block's frame 20-73 % feed (the 9 Hz platform too, where an in-ph
 reads noise). Synthetic takes without dynamics (facedyn.stabilize.synthetic): no vertex
 passes EXPLAINED, nothing is flagged.
 
-Below the tissue's resonance the in-phase part tells which vertex is stiffest: in a
-block's frame the bone leads most (alpha largest), which skull_seed uses to find it.
+The in-phase part tells which vertex is stiffest: in a block's frame the bone leads most
+(alpha largest, the head's motion being mostly below the block's resonance), which
+skull_seed uses to find it.
 """
 from __future__ import annotations
 
@@ -95,10 +96,9 @@ def skull_seed(world: np.ndarray, translate: np.ndarray, orient: np.ndarray, res
     the bone is what leads most. So the seed is every inertial vertex (as check_frame
     counts them) whose in-phase gain is within SEED_SHARE of the strongest lead (the 99th
     percentile of their gains, not the maximum, which a noisy vertex can set). Measured on
-    the ICT rig's discovered frames: 1,097-1,157 vertices, holding 906-910 of its 910 bone
-    vertices on walking, running and hopping; on the 9 Hz platform, above the block's
-    resonance, the bone does not lead most and the seed misses it. None where the take
-    cannot tell (as check_frame) or nothing leads.
+    the ICT rig's discovered frames (2 s takes): 1,081-1,183 vertices, holding 906-910 of
+    its 910 bone vertices on walking, running, hopping and the 9 Hz platform. None where
+    the take cannot tell (as check_frame) or nothing leads.
     """
     if not _can_tell(len(world), fps):
         return None
