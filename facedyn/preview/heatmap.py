@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from facedyn.preview.colormap import diverging, normal_component_mm
-from facedyn.preview.normals import VertexNormals
+from facedyn.geometry.mesh import VertexNormals
 
 
 def symmetric_range_mm(signed_mm: np.ndarray, percentile: float = 99.5, floor_mm: float = 0.5) -> float:
@@ -19,7 +19,7 @@ def offset_heat(points: np.ndarray, offsets: np.ndarray, triangles: np.ndarray, 
     offsets = np.asarray(offsets, dtype=np.float32)
     if points.shape != offsets.shape:
         raise ValueError(f"offsets {offsets.shape} do not match points {points.shape}")
-    normals = VertexNormals(triangles, points.shape[-2])(points)
+    normals = VertexNormals(triangles, points.shape[-2], np.float32)(points)
     signed = normal_component_mm(offsets, normals)
     range_mm = symmetric_range_mm(signed) if range_mm is None else float(range_mm)
     return diverging(signed, range_mm), signed, range_mm

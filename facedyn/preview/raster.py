@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from facedyn.preview.colormap import BACKGROUND
-from facedyn.preview.normals import VertexNormals, face_normals, normalize
+from facedyn.geometry.mesh import VertexNormals, face_normals, normalize
 
 # Inside-test tolerance in barycentric units: pixel centres on a shared edge must not fall
 # through the crack between two triangles because of rounding.
@@ -270,7 +270,7 @@ class Renderer:
     ):
         if shading not in ("smooth", "flat"):
             raise ValueError(f"shading must be 'smooth' or 'flat', got {shading!r}")
-        self.normals = VertexNormals(triangles, point_count)
+        self.normals = VertexNormals(triangles, point_count, np.float32)
         self.triangles = self.normals.triangles
         self.camera = camera
         self.shading = shading

@@ -433,7 +433,7 @@ class _Tissue:
         self.free = free
         self.mass = mass[free]
         self.spring = (2 * np.pi * hz) ** 2  # w_i^2
-        along = vertex_normals(neutral, tri)[free] if params.normal_ratio > 1 else None
+        along = mesh.vertex_normals(neutral, tri)[free] if params.normal_ratio > 1 else None
         self.directions = _Directions(along, params.normal_ratio**2 - 1.0)
         self.membrane = ((params.coupling_cm * 2 * np.pi * params.soft_hz) ** 2 * lap).tocsr()
         self.a, self.b = params.rayleigh()
@@ -705,19 +705,6 @@ class _Directions:
         count = x.shape[0] // 3
         x4 = x.reshape(count, 3, -1, 3)
         return np.einsum("iafc,fc->fia", x4[:, :, groups], turned)
-
-
-def vertex_normals(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(..., V, 3) area-weighted unit vertex normals of (..., V, 3) points; the triangles'
-    winding decides the side."""
-    tri = np.asarray(triangles)
-    flat = np.asarray(points).reshape((-1,) + np.shape(points)[-2:])
-    face = np.cross(flat[:, tri[:, 1]] - flat[:, tri[:, 0]], flat[:, tri[:, 2]] - flat[:, tri[:, 0]])
-    normals = np.zeros_like(flat)
-    for k in range(3):
-        np.add.at(normals, (slice(None), tri[:, k]), face)
-    normals /= np.maximum(np.linalg.norm(normals, axis=2, keepdims=True), 1e-300)
-    return normals.reshape(np.shape(points))
 
 
 class _FrameAccelerations:

@@ -51,7 +51,7 @@ from scipy.sparse.csgraph import connected_components
 
 from facedyn.geometry import mesh
 from facedyn.sim import layout
-from facedyn.sim.tissue import SkullMotion, single_threaded_blas, validate_inputs, vertex_normals
+from facedyn.sim.tissue import SkullMotion, single_threaded_blas, validate_inputs
 
 # A prism (three tetrahedra) thinner than this fraction of its ideal volume counts as folded.
 _MIN_QUALITY = 0.2
@@ -296,7 +296,7 @@ class Layer:
 
     def normals(self, y_vertices: np.ndarray) -> np.ndarray:
         """(F, V, 3) outward unit normals of the skin over the layer's columns (area-weighted)."""
-        return self.outward * vertex_normals(y_vertices, self.triangles)
+        return self.outward * mesh.vertex_normals(y_vertices, self.triangles)
 
     def rest_positions(self, y_vertices: np.ndarray) -> np.ndarray:
         """(F, nodes, 3) rest configuration X from the skin of the layer's vertices (F, V, 3):

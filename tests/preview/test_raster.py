@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from facedyn.preview import colormap
-from facedyn.preview.normals import VertexNormals
+from facedyn.geometry.mesh import VertexNormals
 from facedyn.preview.raster import Renderer, frame_camera, rasterize
 
 
@@ -99,7 +99,7 @@ def test_framing_centres_the_mesh_and_fills_the_frame():
 
 def test_offsets_toward_the_viewer_are_green_away_red_zero_grey():
     pts, tris = grid(31, 11, width=3.0, height=1.0)
-    normals = VertexNormals(tris, len(pts))(pts)
+    normals = VertexNormals(tris, len(pts), np.float32)(pts)
     sign = np.select([pts[:, 0] < -0.5, pts[:, 0] > 0.5], [1.0, -1.0], 0.0)
     offsets = 0.2 * sign[:, None] * normals  # 2 mm along the normal, which faces the camera
     mm = colormap.normal_component_mm(offsets, normals)

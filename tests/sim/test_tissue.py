@@ -14,7 +14,7 @@ import scipy.sparse as sp
 from scipy.integrate import solve_ivp
 
 from facedyn.geometry import mesh, quaternion
-from facedyn.sim.tissue import SimulationResult, TissueParams, simulate, vertex_normals
+from facedyn.sim.tissue import SimulationResult, TissueParams, simulate
 
 FPS = 120.0
 
@@ -138,7 +138,7 @@ def test_springs_stiffer_along_the_normal_are_two_oscillators():
     ratio = 2.5
     params = TissueParams(coupling_cm=1e-6, strain_stiffening=0.0, normal_ratio=ratio)
     a, b = params.rayleigh()
-    normals = vertex_normals(points, tris)
+    normals = mesh.vertex_normals(points, tris)
     frames, hz = 480, 8.0
     translate, orient = sinusoid(frames, hz, 0.2)
     result = simulate(held(points, frames), tris, translate, orient, FPS, params)
@@ -366,7 +366,7 @@ def test_gravity_sag_is_the_static_solution_under_any_expression(patch, normal_r
     spring = (2 * np.pi * params.attachment_hz(weights[free])) ** 2
     g = np.array([0.0, -params.gravity_cm_s2, 0.0])
     turned = np.einsum("fji,j->fi", quaternion.to_matrix(orient), g) - quaternion.to_matrix(orient[0]).T @ g
-    normals = vertex_normals(points, tris)[free]
+    normals = mesh.vertex_normals(points, tris)[free]
     for f in (0, 45, 89):
         sag = result.gravity_sag[f, free]
         along = normals * np.sum(normals * sag, axis=1, keepdims=True)
