@@ -250,7 +250,7 @@ def align_weighted(world, target, method, weights, three_point=None, most_vertic
         return baselines.align_frames(world, target, method, weights, three_point, **options)
     used = np.arange(world.shape[1]) if weights is None else np.flatnonzero(weights > 0)
     if most_vertices is not None and len(used) > most_vertices:
-        used = used[np.linspace(0, len(used) - 1, most_vertices).round().astype(int)]
+        used = used[rest_estimate.sample_frames(len(used), most_vertices)]  # evenly spaced indices
     if len(used) == world.shape[1]:
         return baselines.align_frames(world, target, method, weights, **options)
     return baselines.align_frames(world[:, used], target[used], method, None if weights is None else weights[used], **options)

@@ -36,6 +36,7 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from facedyn.geometry import quaternion
+from facedyn.stabilize.rest import sample_frames
 
 BAND_HZ = (0.7, 15.0)  # the head's motion: walking and running (1-5 Hz) to platforms (up to 15 Hz); top <= fps / 4
 EXPLAINED = 0.5  # R^2 of the response to acceleration at which a vertex's motion counts as inertia
@@ -80,7 +81,7 @@ def check_frame(world: np.ndarray, translate: np.ndarray, orient: np.ndarray, re
     """
     if not _can_tell(len(world), fps) or len(vertices) < 3:
         return None
-    used = vertices[np.linspace(0, len(vertices) - 1, min(MOST_VERTICES, len(vertices))).round().astype(int)]
+    used = vertices[sample_frames(len(vertices), MOST_VERTICES)]  # evenly spaced indices
     response = vertex_response(world, translate, orient, rest, used, fps)
     inertial = response.explained >= EXPLAINED
     share = response.quadrature_share

@@ -218,14 +218,11 @@ def middle_window(frames: int, fps: float) -> slice:
 
 def _inertia(model: RigidModel, window: np.ndarray, fps: float):
     """The inertia check of the frame a robust fit on the model's weights gives each window frame, and that frame."""
-    fitted = _strided(np.flatnonzero(model.weights > 0))
+    fitted = np.flatnonzero(model.weights > 0)
+    fitted = fitted[rest_estimate.sample_frames(len(fitted), FIT_VERTICES)]  # evenly spaced, enough for a rigid fit
     rot, trans, _ = rigid.robust_icp(window[:, fitted].astype(np.float64), model.rest[fitted], model.weights[fitted],
                                      iterations=ICP_ITERATIONS)
     to_world = np.transpose(rot, (0, 2, 1))  # the fit maps world to skull: skull = R world + t
     frame = (-np.einsum("fij,fj->fi", to_world, trans), quaternion.from_matrix(to_world))
     return inertia.check_frame(window, *frame, model.rest, np.flatnonzero(model.weights == 0), fps), frame
 
-
-def _strided(vertices: np.ndarray) -> np.ndarray:
-    """At most FIT_VERTICES of the vertices, evenly strided: enough to fit a rigid frame on."""
-    return vertices[np.linspace(0, len(vertices) - 1, min(FIT_VERTICES, len(vertices))).round().astype(int)]

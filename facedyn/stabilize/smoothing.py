@@ -169,14 +169,15 @@ def extend(values: np.ndarray, weights: np.ndarray, lam: float, order: int = ORD
 
 def _predicted(values: np.ndarray, order: int, frames: int) -> np.ndarray:
     """(frames, K): each column continued past its end by its own least-squares AR(order) model."""
-    centred = values - values.mean(axis=0)
+    mean = values.mean(axis=0)
+    centred = values - mean
     count = len(values) - order
+    lags = np.stack([centred[order - j - 1:order - j - 1 + count] for j in range(order)], axis=1)  # (count, order, K): lag j + 1
+    coefficients = np.stack([np.linalg.lstsq(lags[:, :, k], centred[order:, k], rcond=None)[0]
+                             for k in range(values.shape[1])], axis=1)  # (order, K)
+    history = centred[:-order - 1:-1].copy()  # (order, K), the latest frame first
     out = np.empty((frames, values.shape[1]))
-    for k in range(values.shape[1]):
-        lags = np.stack([centred[order - j - 1:order - j - 1 + count, k] for j in range(order)], axis=1)
-        coefficients = np.linalg.lstsq(lags, centred[order:, k], rcond=None)[0]
-        history = list(centred[-order:, k])
-        for i in range(frames):
-            history.append(float(np.dot(coefficients, history[:-order - 1:-1])))
-            out[i, k] = history[-1]
-    return out + values.mean(axis=0)
+    for i in range(frames):
+        out[i] = np.sum(coefficients * history, axis=0)
+        history = np.concatenate([out[i:i + 1], history[:-1]])
+    return out + mean
