@@ -157,10 +157,13 @@ def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | Volumetri
     quasistatic = rig.evaluate(weights) if rig.expression_count else np.repeat(rig.neutral[None], frame_count, 0)
     params = spec.tissue or tissue or TissueParams()
     physics = volumetric if isinstance(params, VolumetricParams) else springs
-    result = physics.simulate(
-        quasistatic, rig.topology.triangles(), trajectory.translate, trajectory.orient, spec.fps, params,
-        noise_cm=spec.noise_cm, seed=spec.seed, rigid_weights=rig.rigid_weights, neutral=rig.neutral,
-    )
+    try:
+        result = physics.simulate(
+            quasistatic, rig.topology.triangles(), trajectory.translate, trajectory.orient, spec.fps, params,
+            noise_cm=spec.noise_cm, seed=spec.seed, rigid_weights=rig.rigid_weights, neutral=rig.neutral,
+        )
+    except springs.SimulationDiverged as exc:
+        raise springs.SimulationDiverged(f"take {spec.name}: {exc}") from None
     return SimulatedPerformance(
         spec=spec,
         frames=np.arange(1, frame_count + 1, dtype=np.float64),

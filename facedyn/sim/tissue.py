@@ -64,6 +64,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.interpolate import CubicSpline
 
+from facedyn.errors import FacedynError
 from facedyn.geometry import mesh, quaternion
 from facedyn.sim import layout
 
@@ -102,6 +103,11 @@ _GL_P, _GL_Q = _stage_predictor()
 
 SAG_BLOCK = 32  # distinct expressions solved together for the gravity sag
 
+
+
+class SimulationDiverged(FacedynError):
+    """A simulation that blew up: the motion or the expression asks more of the step than it can integrate (a user's
+    input, e.g. an extreme BVH, reported in one line, not a bug)."""
 
 @dataclass(frozen=True)
 class TissueParams:
@@ -276,7 +282,7 @@ def simulate(
             factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
             # a deflection beyond the face's own size (or no number at all) is no tissue: the integration diverged
             if not max(offsets.max(), -offsets.min()) <= np.ptp(neutral, axis=0).max():  # no take-sized temporary
-                raise ValueError("the spring tissue diverged: skull accelerations or expression changes too large for the step "
+                raise SimulationDiverged("the spring tissue diverged: skull accelerations or expression changes too large for the step "
                                  "(raise substeps or lower refactor_tolerance)")
             if np.any(turned):
                 sag[:, free] = tissue.gravity_sag(gain[:, free], turned)

@@ -51,7 +51,7 @@ from scipy.sparse.csgraph import connected_components
 
 from facedyn.geometry import mesh
 from facedyn.sim import layout
-from facedyn.sim.tissue import SkullMotion, single_threaded_blas, validate_inputs
+from facedyn.sim.tissue import SimulationDiverged, SkullMotion, single_threaded_blas, validate_inputs
 
 # A prism (three tetrahedra) thinner than this fraction of its ideal volume counts as folded.
 _MIN_QUALITY = 0.2
@@ -413,7 +413,7 @@ class Layer:
                 if np.abs(step).max() <= self.params.tolerance_cm:
                     break
             if not np.isfinite(sag).all():  # no sag, not a silent NaN truth
-                raise ValueError(f"the volumetric tissue's gravity sag diverged at frame {f}: no static equilibrium "
+                raise SimulationDiverged(f"the volumetric tissue's gravity sag diverged at frame {f}: no static equilibrium "
                                  "found for this pose and turn of the head")
             out[f, self.skin] = sag[self.dof[self.skin]]
         return out
@@ -632,10 +632,10 @@ def _integrate(layer: Layer, y: np.ndarray, skull: SkullMotion, fps: float, para
                     x[free] += u
                     solver, factorizations = factorize(layer.tangent_stiffness(x, shape, volume)), factorizations + 1
                     continue
-                raise ValueError(f"the volumetric tissue did not converge at frame {step // substeps}: "
+                raise SimulationDiverged(f"the volumetric tissue did not converge at frame {step // substeps}: "
                                  "skull accelerations or expression changes too large for the step (raise substeps)")
             if not np.isfinite(u).all():
-                raise ValueError(f"the volumetric tissue diverged at frame {step // substeps}: "
+                raise SimulationDiverged(f"the volumetric tissue diverged at frame {step // substeps}: "
                                  "skull accelerations or expression changes too large for the step (raise substeps)")
             break
         a = c1 * (u - u_old - h * v_old) - a_old
