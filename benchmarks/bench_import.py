@@ -20,12 +20,12 @@ import argparse
 import functools
 import json
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from bench_long_take import run_step
+from spill import work_folder, work_folder_arguments
 
 SOURCE_FPS = 120.0
 RESAMPLED_FPS = 100.0  # the --fps case: every output frame falls between source samples
@@ -104,11 +104,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, nargs="+", default=[10_000, 50_000])
     parser.add_argument("--obj-frames", type=int, default=3000)
-    parser.add_argument("--workdir", type=Path, default=None)
-    parser.add_argument("--keep", action="store_true")
+    work_folder_arguments(parser)
     args = parser.parse_args()
-    work = Path(tempfile.mkdtemp(prefix="bench_import.", dir=args.workdir))
-    try:
+    with work_folder("bench_import.", args) as work:
         for frames in args.frames:
             cache = write_usd_cache(work / f"cache_{frames}.usdc", frames)
             print(json.dumps(import_case(f"usd {frames}", cache, work, frames)), flush=True)
@@ -121,9 +119,6 @@ def main() -> None:
             folder = write_obj_sequence(work / "objs", args.obj_frames, gap)
             print(json.dumps(import_case(f"obj {args.obj_frames} (5 missing)", folder, work, args.obj_frames,
                                          "--fps", SOURCE_FPS, "--units", 1.0)), flush=True)
-    finally:
-        if not args.keep:
-            shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -18,20 +18,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from bench_import import CHUNK, built_in_face, import_case
+from spill import work_folder, work_folder_arguments
 
 RIG_FPS = 24.0  # USD's default rate: the rig layer is sublayered unscaled (and imports before this streamed could read it)
 
 
 def write_skel_take(folder: Path, count: int) -> Path:
     """performance.usdc (over rig.usdc): `count` frames of expression weights and head motion from frame 1001."""
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+    from pxr import Gf, Sdf, Usd, UsdSkel, Vt
 
     from facedyn.usd.rig import write_blendshape_rig
 
@@ -77,17 +76,12 @@ def write_skel_take(folder: Path, count: int) -> Path:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, nargs="+", default=[2_000, 10_000])
-    parser.add_argument("--workdir", type=Path, default=None)
-    parser.add_argument("--keep", action="store_true")
+    work_folder_arguments(parser)
     args = parser.parse_args()
-    work = Path(tempfile.mkdtemp(prefix="bench_import_skel.", dir=args.workdir))
-    try:
+    with work_folder("bench_import_skel.", args) as work:
         for frames in args.frames:
             source = write_skel_take(work, frames)
             print(json.dumps(import_case(f"skel {frames}", source, work, frames)), flush=True)
-    finally:
-        if not args.keep:
-            shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":

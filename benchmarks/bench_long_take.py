@@ -26,11 +26,12 @@ import json
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+from spill import work_folder, work_folder_arguments
 
 STEP = """
 import sys
@@ -157,13 +158,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, nargs="+", default=[10_000, 50_000])
     parser.add_argument("--fps", type=float, default=120.0)
-    parser.add_argument("--workdir", type=Path, default=None)
-    parser.add_argument("--keep", action="store_true")
+    work_folder_arguments(parser)
     parser.add_argument("--compare", action="store_true", help="also compare chunked and unchunked stabilize at the first count")
     parser.add_argument("--compare-only", action="store_true", help="only stabilize, and compare it with the unchunked solve")
     args = parser.parse_args()
-    work = Path(tempfile.mkdtemp(prefix="long_take.", dir=args.workdir))
-    try:
+    with work_folder("long_take.", args) as work:
         base, models = short_take(work, args.fps, train=not args.compare_only)
         for k, frames in enumerate(args.frames):
             take = work / f"take_{frames}"
@@ -187,9 +186,6 @@ def main() -> None:
                 print(json.dumps(chunked_vs_unchunked(root, truth(0, frames), take / "stabilized.usdc")), flush=True)
             if not args.keep:
                 shutil.rmtree(take)
-    finally:
-        if not args.keep:
-            shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":
