@@ -19,7 +19,8 @@ import torch
 from facedyn.dynamics.features import check_fps, compute_features
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import resolve_device
-from facedyn.dynamics.skull import check_points, check_transforms
+from facedyn.dynamics.skull import check_points, check_transforms, skull_space
+from facedyn.dynamics.spikes import replace_spikes
 from facedyn.geometry import quaternion
 
 CHUNK_FRAMES = 128
@@ -77,9 +78,9 @@ def remove_dynamics(
     model.check_compatible(fps=check_fps(fps))
     t, q = check_transforms(translate, orient, f)
     skull_points = _to_skull32(pts, t, q) if space == "world" else np.asarray(pts, dtype=np.float32)
-    # The samples in float64 from the input itself, so world-space features lose nothing
-    # to the float32 skull-space copy above.
-    sample_points = pts[:, model.face.samples].astype(np.float64)
+    # The samples in float64 from the input itself, so they lose nothing to the float32
+    # skull-space copy above; F reads them with the tracker's spikes replaced.
+    sample_points, _ = replace_spikes(skull_space(pts[:, model.face.samples], t, q, space))
     propagator = model.propagator()
     network = model.network.to(resolve_device(device)).eval()
     dev = next(network.parameters()).device
@@ -94,7 +95,7 @@ def remove_dynamics(
     with torch.inference_mode():
         for a in range(0, f, int(chunk_frames)):
             b = min(f, a + int(chunk_frames))
-            feats = compute_features(sample_points, t, q, model.face.landmarks, fps, space=space, window=window, frame_range=(a, b), backend=backend)
+            feats = compute_features(sample_points, t, q, model.face.landmarks, fps, space="skull", window=window, frame_range=(a, b), backend=backend)
             b_t = feats.skull if skull is None else skull[a:b]
             skin = skin_inputs(feats.skin, positions)
             d = network.forward_split(torch.from_numpy(b_t).to(dev), torch.from_numpy(np.ascontiguousarray(skin)).to(dev))

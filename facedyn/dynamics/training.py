@@ -33,6 +33,7 @@ from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import Network, NetworkSpec, removal_spec, resolve_device
 from facedyn.dynamics.removal import SAMPLE_POSITIONS, sample_positions, skin_inputs
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
+from facedyn.dynamics.spikes import replace_spikes
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.store import StreamedExamples, TrainingStore
 from facedyn.dynamics.targets import TARGET_WINDOW, dynamic_offsets
@@ -228,7 +229,7 @@ def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig, backe
     if f <= 2 * config.trim:
         raise ValueError(f"take {take.name!r} has {f} frames, too few to leave out {config.trim} at each end")
     t, q = check_transforms(take.translate, take.orient, f)
-    samples = skull_space(pts[:, face.samples], t, q, take.space)
+    samples, _ = replace_spikes(skull_space(pts[:, face.samples], t, q, take.space))  # what F reads (removal does the same)
     skull = None if config.skull_motion is None else config.skull_motion.features(t, q, face.landmarks, take.fps)
     positions = sample_positions(face) if config.sample_positions else None
     if config.target == "truth":

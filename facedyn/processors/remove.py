@@ -85,10 +85,14 @@ def context_frames(model) -> int:
     """Frames of context on each side that make a chunk's result equal to the whole take's.
 
     Every window a model reads (feature windows, skull motion past and future, smoothing),
-    plus the frames its velocities and accelerations difference over.
+    plus the frames its velocities and accelerations difference over, and for F the frames
+    a spike replacement looks at (facedyn.dynamics.spikes).
     """
+    from facedyn.dynamics.spikes import REACH
+
     motion = model.skull_input
-    return sum(int(w) for w in model.windows.values()) + motion.past + motion.future + 4
+    spikes = REACH if model.kind == "removal" else 0  # F reads the skin with its spikes replaced
+    return sum(int(w) for w in model.windows.values()) + motion.past + motion.future + 4 + spikes
 
 
 def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:
