@@ -22,7 +22,8 @@ new skull motion, S(t) of the quasistatic shape, H, then the Laplacian propagati
 """
 from __future__ import annotations
 
-from dataclasses import asdict
+import copy
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Iterable, Iterator, Mapping
 
@@ -38,11 +39,12 @@ from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
 from facedyn.dynamics.targets import moving_average
-from facedyn.dynamics.training import (ProgressCallback, Resident, TrainingSequence, TrainConfig, fit_new_network, offset_errors, split_store,
+from facedyn.dynamics.training import (ProgressCallback, Resident, TrainingSequence, TrainConfig, fit, fit_new_network, offset_errors, split_store,
                                        store_takes, streamed_normalization)
 from facedyn.performance import UVs
 
 EPOCHS = 30
+CALIBRATION_EPOCHS = 100  # a calibration session is a few minutes of frames: more passes over them
 BATCH_FRAMES = 50
 CHUNK_FRAMES = 1024
 
@@ -130,6 +132,51 @@ def train_synthesis(
         windows={"stretch_smoothing": config.target_window}, info=info,
         arrays=stretch_arrays(nb, lengths), skull_motion=skull_motion,
     )
+
+
+def calibrate_synthesis(
+    model: DynamicsModel,
+    takes: Iterable,
+    quasistatic: DynamicsModel | Mapping[str, np.ndarray],
+    config: TrainConfig | None = None,
+    progress: ProgressCallback | None = None,
+    backend: str = "auto",
+    *,
+    scratch: Path | str | None = None,
+) -> DynamicsModel:
+    """H trained further on one actor's own takes: a copy of ``model`` whose network goes on
+    learning from them, with everything else it reads (samples, landmarks, stretch setup,
+    skull input, normalization) kept.
+
+    Why: H maps skull motion to the tissue's answer, and one H trained on a family of
+    simulated tissues learns the family's average answer, which a given actor's tissue does
+    not give (papers/000 trains H per actor, on that actor's captures through F). Calibration
+    captures are the paper's kind: held expressions under motions such as platforms, walks
+    and jumps; ``quasistatic`` is what gives their y(t) (a removal model F, or shapes by take
+    name), as for `train_synthesis`. ``config`` defaults to `synthesis_config` with
+    CALIBRATION_EPOCHS; its skull input is the model's.
+    """
+    if model.kind != "synthesis":
+        raise ValueError(f"calibrate_synthesis needs a synthesis model, got a {model.kind!r} model")
+    config = replace(config or synthesis_config(epochs=CALIBRATION_EPOCHS), skull_motion=model.skull_input)
+    source = _source_description(quasistatic)
+    nb, lengths = model_stretch(model)
+    device = resolve_device(config.device)
+    network = copy.deepcopy(model.network).to(device)
+    store, described, fps = store_takes(takes, lambda take: _prepare(take, model.face, nb, lengths, quasistatic, config, backend, model.skull_input), scratch)
+    with store:
+        if abs(fps - model.fps) > 1e-6 * model.fps:
+            raise ValueError(f"the takes run at {fps:g} fps, the synthesis model at {model.fps:g}; a model serves one rate")
+        train, val = split_store(store, described, config, 1, lambda a: FrameSet(a["inputs"], a["targets"], device))
+        curve = fit(network, train, val, config, progress)
+        errors = offset_errors(network, val, config.batch_size, "frames") if val is not None else None
+    network.cpu()
+    calibration = {"takes": described, "train_frames": len(train), "quasistatic_source": source, "device": str(device),
+                   "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()},
+                   "loss_curve": curve}
+    info = {**model.info, "calibration": calibration, "validation": errors}
+    return DynamicsModel(kind="synthesis", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
+                         arrays=dict(model.arrays), skull_motion=model.skull_input)
 
 
 def synthesize_dynamics(

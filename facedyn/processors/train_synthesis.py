@@ -6,10 +6,16 @@ model F run on the takes (`--quasistatic MODEL`); beyond the paper, a simulated 
 give its true quasistatic shapes (`--quasistatic truth`). H reads the skull's landmark
 accelerations by default, the paper's velocities with `--skull-features velocity`
 (facedyn.dynamics.skull_motion says why).
+
+`--calibrate MODEL` goes on training an existing H (one trained on a simulated corpus of
+many tissues) on one actor's own captures instead, through F as the paper does: the actor's
+tissue answers the skull in its own way, which a family's average does not
+(facedyn.dynamics.synthesis.calibrate_synthesis).
 """
 from __future__ import annotations
 
 from functools import partial
+from pathlib import Path
 
 from facedyn.processors.base import FileOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.processors.train_removal import training_summary
@@ -27,9 +33,13 @@ class TrainSynthesisProcessor(Processor):
     parameters = (
         Parameter("quasistatic", str, help="a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes)",
                   metavar="MODEL|truth"),
-        Parameter("epochs", int, 30, "training epochs (the paper trains 30)", minimum=1, maximum=100000),
+        Parameter("calibrate", Path, None, "a synthesis model to go on training on these takes (an actor's own captures, "
+                  "through --quasistatic F) instead of a new one; it keeps its samples, stretch setup and skull input",
+                  metavar="MODEL"),
+        Parameter("epochs", int, None, "training epochs (default: the paper's 30; 100 when calibrating)", minimum=1, maximum=100000),
         Parameter("skull_features", str, "acceleration",
-                  "H's skull input: landmark accelerations over t-30..t+10 (beyond the paper), or the paper's velocities over t-10..t+10",
+                  "H's skull input: landmark accelerations over t-30..t+10 (beyond the paper), or the paper's velocities over t-10..t+10 "
+                  "(calibrating: the model's own)",
                   ("acceleration", "velocity")),
         *TRAINING_PARAMETERS,
     )
@@ -41,7 +51,7 @@ class TrainSynthesisProcessor(Processor):
         params = request.params
         takes = load_takes(request.inputs, params, Progress.silent())
         first = takes[0][1]
-        if first.uvs is None:
+        if first.uvs is None and params["calibrate"] is None:  # a calibrated model brings its stretch setup
             raise TakeError(f"{request.inputs[0]}: the takes have no uvs (primvars:st); stretch features need them")
         face, frame = training_face(request.inputs, params, takes)
         if params["quasistatic"] == "truth":
@@ -55,25 +65,47 @@ class TrainSynthesisProcessor(Processor):
                 raise TakeError(f"{params['quasistatic']}: the removal model was trained in another skull frame than these takes'; "
                                 "train F and H on takes of one actor")
             face = quasistatic.face  # H uses F's samples and landmarks
+        calibrated = None if params["calibrate"] is None else calibration_model(params["calibrate"], first, frame)
         description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes),
                        "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": params["epochs"],
-                       "actor": frame.get("actor")}
-        return Plan(description, (request, takes, quasistatic, face, frame))
+                       "actor": frame.get("actor"), "calibrate": None if calibrated is None else str(params["calibrate"])}
+        return Plan(description, (request, takes, quasistatic, face, frame, calibrated))
 
     def run(self, plan: Plan, progress: Progress) -> FileOutput:
         from facedyn.dynamics.modelfile import save_model
         from facedyn.dynamics.skull_motion import NAMED
-        from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
+        from facedyn.dynamics.synthesis import CALIBRATION_EPOCHS, EPOCHS, calibrate_synthesis, synthesis_config, train_synthesis
         from facedyn.dynamics.training import TrainingSequence
 
-        request, takes, quasistatic, face, frame = plan.state
+        request, takes, quasistatic, face, frame, calibrated = plan.state
         params = request.params
-        config = synthesis_config(epochs=params["epochs"], validation=validation_names(params), seed=params["seed"],
+        epochs = params["epochs"] or (EPOCHS if calibrated is None else CALIBRATION_EPOCHS)
+        config = synthesis_config(epochs=epochs, validation=validation_names(params), seed=params["seed"],
                                   device=params["device"], skull_motion=NAMED[params["skull_features"]])
-        on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
-        model = train_synthesis([TrainingSequence.from_performance(perf, name) for name, perf in takes], face, takes[0][1].uvs,
-                                quasistatic, config, on_epoch, backend=params["backend"])
+        sequences = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
+        if calibrated is None:
+            on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
+            model = train_synthesis(sequences, face, takes[0][1].uvs, quasistatic, config, on_epoch, backend=params["backend"])
+        else:
+            on_epoch, last = epoch_reporter(progress, f"calibrate H ({len(takes)} takes)", config.epochs)
+            model = calibrate_synthesis(calibrated, sequences, quasistatic, config, on_epoch, backend=params["backend"])
         progress.finish()
         model.info.update(frame)
-        model.info["training"].update(skull=params["skull"], inputs=[str(p) for p in request.inputs], quasistatic=params["quasistatic"])
-        return FileOutput(partial(save_model, model), {**training_summary(model, takes, face, last), "quasistatic": params["quasistatic"]})
+        record = model.info["calibration"] if calibrated is not None else model.info["training"]
+        record.update(skull=params["skull"], inputs=[str(p) for p in request.inputs], quasistatic=params["quasistatic"])
+        summary = {**training_summary(model, takes, face if calibrated is None else calibrated.face, last), "quasistatic": params["quasistatic"]}
+        return FileOutput(partial(save_model, model), summary)
+
+
+def calibration_model(path: Path, first, frame: dict):
+    """The synthesis model to calibrate, checked against the takes: topology, frame rate and skull frame."""
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.usd.errors import TakeError
+
+    model = load_model(path, topology=first.topology, fps=first.fps)
+    if model.kind != "synthesis":
+        raise TakeError(f"{path}: a {model.kind} model; --calibrate needs a synthesis model")
+    if model.info.get("skull_frame") not in (None, frame["skull_frame"]):
+        raise TakeError(f"{path}: the synthesis model was trained in another skull frame than these takes'; stabilize the "
+                        "calibration takes with the --actor the model was trained for")
+    return model

@@ -99,7 +99,7 @@ def test_help_marks_required_and_prints_each_default_once(capsys):
     out = capsys.readouterr().out
     flat = " ".join(out.split())
     assert "--quasistatic MODEL|truth a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes) (required)" in flat
-    assert out.count("(default: 30)") == 1
+    assert out.count("(default: 344)") == 1
     with pytest.raises(SystemExit):
         main(["--help"])
     out = capsys.readouterr().out

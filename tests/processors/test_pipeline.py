@@ -161,6 +161,31 @@ def test_training_skull_features(corpus, capsys, tmp_path):
     assert load_model(tmp_path / "acc.removal").skull_motion == SkullMotionInput()
 
 
+def test_train_synthesis_calibrates_an_existing_h_on_an_actors_takes(corpus, capsys, tmp_path):
+    """--calibrate goes on training a synthesis model on other takes: same samples, stretch
+    setup and skull input, the calibration recorded; a removal model is refused."""
+    import json
+
+    from facedyn.dynamics.modelfile import load_model
+
+    folder, models = corpus
+    takes = [folder / "smile_walk", folder / "jaw_open_platform7"]
+    assert cli("train-synthesis", *takes, "-o", tmp_path / "actor.synthesis", "--calibrate", models / "h.synthesis",
+               "--quasistatic", models / "f.removal", "--skull", "truth", "--epochs", "2") == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["summary"]["takes"] == 2
+    family, calibrated = load_model(models / "h.synthesis"), load_model(tmp_path / "actor.synthesis")
+    assert np.array_equal(calibrated.face.samples, family.face.samples) and calibrated.skull_input == family.skull_input
+    assert set(calibrated.arrays) == set(family.arrays)
+    assert [t["name"] for t in calibrated.info["calibration"]["takes"]] == ["smile_walk", "jaw_open_platform7"]
+    assert calibrated.info["training"] == family.info["training"]
+    assert not all(torch.equal(a, b) for a, b in zip(calibrated.network.parameters(), family.network.parameters()))
+    assert cli("train-synthesis", *takes, "-o", tmp_path / "bad.synthesis", "--calibrate", models / "f.removal",
+               "--quasistatic", models / "f.removal", "--skull", "truth") != 0
+    assert "--calibrate needs a synthesis model" in capsys.readouterr().err
+    assert not (tmp_path / "bad.synthesis").exists()
+
+
 def _stack(root):
     layer = Sdf.Layer.OpenAsAnonymous(str(root))
     return list(layer.subLayerPaths)
