@@ -26,12 +26,21 @@ no truth, no rest) and go through `import`, `stabilize --actor actor.usda`, `rem
   - a held smile on a 8 Hz platform (training has 7, 9 and 11 Hz);
   - synthesis under new motion: the dialog under CMU 131_03 hopping; H synthesizes the
     dynamics from F's quasistatic output and the solved skull; against the true dynamics.
+Calibration (the paper trains H per actor, on the actor's captures through F): each test
+actor also gives a calibration session, nine held expressions of 1.5 s under motions no test
+take uses (platforms at 6, 7, 9, 10 and 11 Hz, a procedural walk, jump, dance and head
+turns; no run, no hop, no 8 Hz), captured and stabilized as above, and
+  usdfacedyn train-synthesis CALIBRATION_TAKES --calibrate H.synthesis --quasistatic F_truth_acc.removal
+goes on training the family's H on them (100 epochs; no truth: F's output is y(t)). Its
+synthesis is reported as H_calibrated beside the family's H.
 Retargeting (A -> B, both volumetric test actors of a group, one topology): A's dialog
 under CMU hopping, captured and processed as above (A's take with its quasistatic layer),
 retargeted onto B's dialog under walking (B's quasistatic layer) with `usdfacedyn retarget`
-(B's synthesis model: the H trained above; and `--method delta-transfer`, A's removed
-offsets copied), scored against B's true dynamics under A's true skull motion (B's tissue
-simulating B's expression under A's motion). Target: synthesis <= 0.5x delta transfer.
+(B's synthesis model: the family's H, and B's calibrated H; and `--method delta-transfer`,
+A's removed offsets copied), scored against B's true dynamics under A's true skull motion
+(B's tissue simulating B's expression under A's motion). Target: synthesis <= 0.5x delta
+transfer. A test take whose volumetric simulation diverges is reported as such and its
+cases are left out.
 
 Held-out actors (``--held-out-actors K``): volumetric actors from seeds (HELD_OUT_SEEDS)
 that were never simulated while the training family was tuned; their JSON carries
@@ -46,10 +55,8 @@ on the solved take. One JSON object per case.
     .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--held-out-actors 0] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--work DIR]
 
 A small-budget protocol (demo-scale corpus with the procedural talking takes, no Live Link
-performances, short takes, few epochs): measured on 2 cores partly shared with other jobs,
-training 4.9 minutes and testing two actors 9.6 minutes before the round-4 tissue family; its springs
-stiffer along the normal solve 3n coordinates at once, so `synth` took 106 s instead of 27 s
-(both measured under a load of 3-5).
+performances, short takes, few epochs). Measured on 2 cores: `synth` 106 s (under a load of
+3-5), the four models 3.3 minutes, each test actor 5-11 minutes with its calibration.
 """
 from __future__ import annotations
 
@@ -67,11 +74,12 @@ from facedyn.dynamics.synthesis import synthesize_dynamics
 from facedyn.dynamics.targets import dynamic_offsets
 from facedyn.evaluation import residual_fraction
 from facedyn.geometry import quaternion
-from facedyn.sim.corpus import SPEECH, TakeSpec, simulate_takes
+from facedyn.sim.corpus import SPEECH, TakeSpec, simulate_take, simulate_takes
 from facedyn.sim.default_face import default_face
 from facedyn.sim import volumetric
 from facedyn.sim.noise import TrackerNoise, add_tracker_noise
 from facedyn.sim.volumetric import VolumetricParams
+from facedyn.sim.tissue import SimulationDiverged
 from plain_capture import usdfacedyn, write_plain_cache
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -86,6 +94,12 @@ F_VARIANTS = {  # name: (train-removal --target, --skull-features, its other fla
     "F_paper": ("moving-average", "velocity", ("--exclude", "dialog*")),
 }
 RECOMMENDED = "F_truth_acc"
+CALIBRATION = (  # (take, motion, held expression) of each test actor's calibration session
+    ("cal_smile_platform6hz", "platform:6", "smile"), ("cal_brow_platform7hz", "platform:7", "brow_raise"),
+    ("cal_puff_platform9hz", "platform:9", "cheek_puff"), ("cal_jaw_platform10hz", "platform:10", "jaw_open"),
+    ("cal_funnel_platform11hz", "platform:11", "funnel"), ("cal_pucker_walk", "walk", "pucker"),
+    ("cal_frown_jump", "jump", "frown"), ("cal_smile_dance", "dance", "smile"), ("cal_jaw_turn", "turn", "jaw_open"),
+)
 
 
 def emit(**fields) -> None:
@@ -123,6 +137,18 @@ def train(work: Path, rig_path: Path, args) -> dict:
     return seconds
 
 
+def plain_capture(sim, rig, folder: Path, actor: Path):
+    """A take's tracked points (tracker noise) as a plain cache, imported and stabilized with
+    the actor through the console; (take root, tracked points)."""
+    tracked = add_tracker_noise(sim.world_points(), sim.fps, TRACKER, rig.neutral, seed=sim.spec.seed)
+    folder.mkdir(parents=True)
+    root = folder / "take.usda"
+    write_plain_cache(folder / "tracked.usdc", tracked.points, rig.topology.face_vertex_counts, rig.topology.face_vertex_indices, sim.fps)
+    usdfacedyn("import", str(folder / "tracked.usdc"), "-o", str(folder / "capture.usdc"))
+    usdfacedyn("stabilize", str(root), "-o", str(folder / "stabilized.usdc"), "--attach", str(root), "--actor", str(actor))
+    return root, tracked
+
+
 class TestTake:
     """A volumetric take's truth, its plain capture through the console, and the layers read back."""
 
@@ -130,17 +156,11 @@ class TestTake:
         from facedyn.usd.take import read_layers, read_take
 
         self.truth = sim
-        fps = sim.fps
-        tracked = add_tracker_noise(sim.world_points(), fps, TRACKER, rig.neutral, seed=sim.spec.seed)
+        self.root, tracked = plain_capture(sim, rig, folder, actor)
         rot = quaternion.to_matrix(sim.skull_orient)
         # the tracked points in the true skull's space (for the upper bound)
         self.tracked_true_skull = np.einsum("fji,fnj->fni", rot, tracked.points - sim.skull_translate[:, None]).astype(np.float32)
-        folder.mkdir(parents=True)
-        self.root = folder / "take.usda"
-        write_plain_cache(folder / "tracked.usdc", tracked.points, rig.topology.face_vertex_counts, rig.topology.face_vertex_indices, fps)
         root = self.root
-        usdfacedyn("import", str(folder / "tracked.usdc"), "-o", str(folder / "capture.usdc"))
-        usdfacedyn("stabilize", str(root), "-o", str(folder / "stabilized.usdc"), "--attach", str(root), "--actor", str(actor))
         self.stabilized, _ = read_take(root)
         self.removed = {}
         for name in F_VARIANTS:
@@ -149,8 +169,32 @@ class TestTake:
             self.removed[name] = read_layers([layer, root])
         layer = folder / "quasistatic.usdc"
         usdfacedyn("remove", str(root), "-o", str(layer), "--attach", str(root), "--model", str(models / f"{RECOMMENDED}.removal"))
-        usdfacedyn("synthesize", str(root), "-o", str(folder / "synthesized.usdc"), "--model", str(models / "H.synthesis"))
-        self.synthesized = read_layers([folder / "synthesized.usdc", root])
+        self.synthesized = {"H": self.synthesize(models / "H.synthesis", "synthesized.usdc")}
+
+    def synthesize(self, model: Path, name: str):
+        """The take's dynamics synthesized by `model` (a layer beside the take, not attached)."""
+        from facedyn.usd.take import read_layers
+
+        layer = self.root.parent / name
+        usdfacedyn("synthesize", str(self.root), "-o", str(layer), "--model", str(model))
+        return read_layers([layer, self.root])
+
+
+def calibration_specs(seconds: float, seed: int) -> dict[str, TakeSpec]:
+    """An actor's calibration session: held expressions under motions none of the test takes
+    use (platforms but not 8 Hz, a procedural walk, jump, dance and turn; no run, no hop)."""
+    return {name: TakeSpec(name, motion, expression, duration_s=seconds, seed=seed + 100 + k)
+            for k, (name, motion, expression) in enumerate(CALIBRATION)}
+
+
+def calibrate_synthesis(sims: dict, rig, folder: Path, work: Path) -> Path:
+    """H calibrated on the actor's calibration captures through the console (plain captures,
+    stabilized with the actor; F gives their quasistatic shapes): the model file."""
+    roots = [plain_capture(sim, rig, folder / label, work / "actor.usda")[0] for label, sim in sims.items()]
+    model = folder / "H_calibrated.synthesis"
+    usdfacedyn("train-synthesis", *map(str, roots), "-o", str(model), "--calibrate", str(work / "H.synthesis"),
+               "--quasistatic", str(work / f"{RECOMMENDED}.removal"), "--device", "cpu")
+    return model
 
 
 def score(estimate, truth, fv) -> float:
@@ -177,22 +221,26 @@ def synthesis_case(actor_name: str, take: TestTake, h_model, fv) -> dict:
     return {"case": "synthesis under new motion (CMU 131_03 hop)", "actor": actor_name, "frames": len(truth),
             "dynamics_rms_mm": round(residual_fraction(truth, truth, truth, fv)["dynamics_rms_cm"] * 10, 3),
             "no_dynamics": 1.0,
-            "H_solved": score(take.synthesized.offsets, truth, fv),
-            "synthesized_rms_mm": round(residual_fraction(take.synthesized.offsets, 0 * truth, truth, fv)["residual_rms_cm"] * 10, 3),
+            "H_solved": score(take.synthesized["H"].offsets, truth, fv),
+            "synthesized_rms_mm": round(residual_fraction(take.synthesized["H"].offsets, 0 * truth, truth, fv)["residual_rms_cm"] * 10, 3),
+            "H_calibrated_solved": score(take.synthesized["H_calibrated"].offsets, truth, fv),
+            "calibrated_rms_mm": round(residual_fraction(take.synthesized["H_calibrated"].offsets, 0 * truth, truth, fv)["residual_rms_cm"] * 10, 3),
             "H_true_skull_true_quasistatic_upper_bound": score(upper, truth, fv)}
 
 
-def retarget_case(source: tuple[str, TestTake], target: tuple[str, VolumetricParams, TestTake], rig, models: Path, h_model, fv) -> dict:
+def retarget_case(source: tuple[str, TestTake], target: tuple[str, VolumetricParams, TestTake, Path], rig, models: Path, h_model, fv) -> dict:
     """A's capture retargeted onto B's quasistatic performance (the console's retarget, both
     methods), against B's tissue under A's true skull motion with B's own expression."""
-    (a_name, a), (b_name, b_params, b) = source, target
+    (a_name, a), (b_name, b_params, b, b_calibrated) = source, target
     y_b = rig.evaluate(b.truth.weights)
     truth_sim = volumetric.simulate(y_b, rig.topology.triangles(), a.truth.skull_translate, a.truth.skull_orient, a.truth.fps, b_params,
                                     rigid_weights=rig.rigid_weights, neutral=rig.neutral)
     truth = truth_sim.dynamics.astype(np.float32)
     folder = b.root.parent
     scores = {}
-    for method, flags in (("synthesis", ("--model", str(models / "H.synthesis"))), ("delta_transfer", ("--method", "delta-transfer"))):
+    methods = (("synthesis", ("--model", str(models / "H.synthesis"))), ("synthesis_calibrated", ("--model", str(b_calibrated))),
+               ("delta_transfer", ("--method", "delta-transfer")))
+    for method, flags in methods:
         layer = folder / f"retargeted.{method}.usdc"
         usdfacedyn("retarget", str(b.root), "--source", str(a.root), "-o", str(layer), *flags)
         scores[method] = score(read_layers_offsets(layer, b.root), truth, fv)
@@ -203,6 +251,8 @@ def retarget_case(source: tuple[str, TestTake], target: tuple[str, VolumetricPar
             "dynamics_rms_mm": round(residual_fraction(truth, truth, truth, fv)["dynamics_rms_cm"] * 10, 3),
             "no_dynamics": 1.0, "H_solved": scores["synthesis"], "delta_transfer_solved": scores["delta_transfer"],
             "ratio_to_delta_transfer": round(scores["synthesis"] / scores["delta_transfer"], 3),
+            "H_calibrated_solved": scores["synthesis_calibrated"],
+            "calibrated_ratio_to_delta_transfer": round(scores["synthesis_calibrated"] / scores["delta_transfer"], 3),
             "delta_transfer_true_offsets_upper_bound": score(a.truth.offsets, truth, fv),
             "H_true_skull_true_quasistatic_upper_bound": score(upper, truth, fv)}
 
@@ -213,25 +263,51 @@ def read_layers_offsets(layer: Path, root: Path) -> np.ndarray:
     return read_layers([layer, root]).offsets
 
 
-def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path, models: dict, h_model, args, started: float) -> tuple[str, VolumetricParams, dict]:
-    """One volumetric actor's test takes through the console, and its cases; (name, tissue, takes)."""
+def simulate_tests(rig, specs: dict[str, TakeSpec], params: VolumetricParams, jobs: int, actor_name: str, tag: dict) -> dict:
+    """{label: simulated take} of the specs; a take whose volumetric simulation diverges is
+    reported (its cases are left out) instead of ending the run."""
+    try:
+        return dict(zip(specs, simulate_takes(rig, list(specs.values()), params, jobs=jobs)))
+    except SimulationDiverged:
+        pass  # one at a time, to learn which
+    sims = {}
+    for label, spec in specs.items():
+        try:
+            sims[label] = simulate_take(rig, spec, params)
+        except SimulationDiverged as exc:
+            emit(case="test take diverged", actor=actor_name, test=label, **tag, error=str(exc))
+    return sims
+
+
+def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path, models: dict, h_model, args, started: float) -> tuple[str, VolumetricParams, dict, Path]:
+    """One volumetric actor's calibration and test takes through the console, and its cases;
+    (name, tissue, test takes, its calibrated H)."""
     fv = rig.face_vertices
     params = VolumetricParams.random(seed, substeps=2)  # one step per frame diverges on CMU hopping for some actors
     actor_name = f"volumetric_{seed}"
     tag = {"held_out": True} if held_out else {}
     emit(case="test actor", actor=actor_name, simulator="facedyn.sim.volumetric", **tag, soft_hz=round(params.soft_hz, 2),
          damping_ratio=round(params.damping_ratio, 3), thickness_cm=round(params.thickness_cm, 2), nonlinearity=round(params.nonlinearity, 2))
-    specs = test_specs(args.seconds, (6000 if held_out else 5000) + 10 * k)
+    base = (6000 if held_out else 5000) + 10 * k
+    specs = test_specs(args.seconds, base)
+    calibration = calibration_specs(args.seconds, base)
     t0 = time.perf_counter()
-    sims = dict(zip(specs, simulate_takes(rig, list(specs.values()), params, jobs=args.jobs)))
+    sims = simulate_tests(rig, {**specs, **calibration}, params, args.jobs, actor_name, tag)
     simulated = time.perf_counter() - t0
     tests = scratch / actor_name  # test takes are never kept: a rerun simulates them afresh
+    t0 = time.perf_counter()
+    calibrated = calibrate_synthesis({label: sims.pop(label) for label in calibration if label in sims}, rig, tests / "calibration", work)
+    calibrating = time.perf_counter() - t0
     takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work) for label, sim in sims.items()}
     for label in ("dialog_walk", "dialog_run", "platform_8hz"):
-        emit(**removal_case(actor_name, label, takes[label], models, fv), **tag)
-    emit(**synthesis_case(actor_name, takes["dialog_hop"], h_model, fv), **tag)
-    emit(case="test timing", actor=actor_name, **tag, simulate_seconds=round(simulated, 1), total_seconds=round(time.perf_counter() - started, 1))
-    return actor_name, params, takes
+        if label in takes:
+            emit(**removal_case(actor_name, label, takes[label], models, fv), **tag)
+    if "dialog_hop" in takes:
+        takes["dialog_hop"].synthesized["H_calibrated"] = takes["dialog_hop"].synthesize(calibrated, "synthesized.calibrated.usdc")
+        emit(**synthesis_case(actor_name, takes["dialog_hop"], h_model, fv), **tag)
+    emit(case="test timing", actor=actor_name, **tag, simulate_seconds=round(simulated, 1), calibrate_seconds=round(calibrating, 1),
+         total_seconds=round(time.perf_counter() - started, 1))
+    return actor_name, params, takes, calibrated
 
 
 def main() -> None:
@@ -273,9 +349,14 @@ def main() -> None:
         groups = [(False, ACTOR_SEEDS[: args.actors]), (True, HELD_OUT_SEEDS[: args.held_out_actors])]
         for held_out, seeds in groups:
             actors = [run_actor(seed, k, held_out, rig, work, Path(scratch), models, h_model, args, started) for k, seed in enumerate(seeds)]
-            for (a_name, _, a_takes), (b_name, b_params, b_takes) in zip(actors[:-1], actors[1:]):
-                emit(**retarget_case((a_name, a_takes["dialog_hop"]), (b_name, b_params, b_takes["dialog_walk"]), rig, work, h_model, fv),
-                     **({"held_out": True} if held_out else {}))
+            for (a_name, _, a_takes, _), (b_name, b_params, b_takes, b_calibrated) in zip(actors[:-1], actors[1:]):
+                if "dialog_hop" not in a_takes or "dialog_walk" not in b_takes:
+                    continue  # reported as diverged above
+                try:
+                    case = retarget_case((a_name, a_takes["dialog_hop"]), (b_name, b_params, b_takes["dialog_walk"], b_calibrated), rig, work, h_model, fv)
+                except SimulationDiverged as exc:
+                    case = {"case": "retargeting truth diverged", "source_actor": a_name, "target_actor": b_name, "error": str(exc)}
+                emit(**case, **({"held_out": True} if held_out else {}))
 
 
 if __name__ == "__main__":
