@@ -412,6 +412,9 @@ class Layer:
                 sag -= step
                 if np.abs(step).max() <= self.params.tolerance_cm:
                     break
+            else:  # not converged: no sag, not a silently wrong truth
+                raise SimulationDiverged(f"the volumetric tissue's gravity sag did not converge at frame {f}: no static "
+                                         "equilibrium found for this pose and turn of the head")
             if not np.isfinite(sag).all():  # no sag, not a silent NaN truth
                 raise SimulationDiverged(f"the volumetric tissue's gravity sag diverged at frame {f}: no static equilibrium "
                                  "found for this pose and turn of the head")

@@ -108,6 +108,17 @@ def test_static_sag_matches_the_shear_layer_estimate(sheet):
     assert not np.any(result.gravity_sag[:, weights == 1])
 
 
+def test_a_gravity_sag_that_does_not_converge_is_an_error(sheet, monkeypatch):
+    """No static equilibrium within the chord iterations is a SimulationDiverged, never a
+    sag returned half-way (one iteration here, where the slab needs several)."""
+    points, tris, weights = sheet
+    frames = 20
+    orient = quaternion.from_axis_angle(np.tile([0.0, 0.0, 1.0], (frames, 1)), np.radians(np.linspace(0.0, 6.0, frames)))
+    monkeypatch.setattr(volumetric, "_MAX_ITERATIONS", 1)
+    with pytest.raises(tissue.SimulationDiverged, match="gravity sag did not converge at frame 1"):
+        simulate(held(points, frames), tris, np.zeros((frames, 3)), orient, FPS, flat(), rigid_weights=weights)
+
+
 def test_a_push_rings_down_at_the_stated_frequency(sheet):
     points, tris, weights = sheet
     frames = 300
