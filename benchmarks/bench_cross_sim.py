@@ -80,7 +80,7 @@ from facedyn.sim import volumetric
 from facedyn.sim.noise import TrackerNoise, add_tracker_noise
 from facedyn.sim.volumetric import VolumetricParams
 from facedyn.sim.tissue import SimulationDiverged
-from plain_capture import usdfacedyn, write_plain_cache
+from plain_capture import stabilize_with_cli, usdfacedyn, write_plain_cache
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TRACKER = TrackerNoise(iid_cm=0.01, temporal_cm=0.004, spatial_cm=0.002, pop_rate=1.0, pop_cm=0.3, drop_rate=0.01)
@@ -142,11 +142,9 @@ def plain_capture(sim, rig, folder: Path, actor: Path):
     the actor through the console; (take root, tracked points)."""
     tracked = add_tracker_noise(sim.world_points(), sim.fps, TRACKER, rig.neutral, seed=sim.spec.seed)
     folder.mkdir(parents=True)
-    root = folder / "take.usda"
     write_plain_cache(folder / "tracked.usdc", tracked.points, rig.topology.face_vertex_counts, rig.topology.face_vertex_indices, sim.fps)
-    usdfacedyn("import", str(folder / "tracked.usdc"), "-o", str(folder / "capture.usdc"))
-    usdfacedyn("stabilize", str(root), "-o", str(folder / "stabilized.usdc"), "--attach", str(root), "--actor", str(actor))
-    return root, tracked
+    stabilize_with_cli(folder / "tracked.usdc", folder, actor)
+    return folder / "take.usda", tracked
 
 
 class TestTake:
@@ -187,7 +185,7 @@ def calibration_specs(seconds: float, seed: int) -> dict[str, TakeSpec]:
             for k, (name, motion, expression) in enumerate(CALIBRATION)}
 
 
-def calibrate_synthesis(sims: dict, rig, folder: Path, work: Path) -> Path:
+def calibrated_h(sims: dict, rig, folder: Path, work: Path) -> Path:
     """H calibrated on the actor's calibration captures through the console (plain captures,
     stabilized with the actor; F gives their quasistatic shapes): the model file."""
     roots = [plain_capture(sim, rig, folder / label, work / "actor.usda")[0] for label, sim in sims.items()]
@@ -296,7 +294,7 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
     simulated = time.perf_counter() - t0
     tests = scratch / actor_name  # test takes are never kept: a rerun simulates them afresh
     t0 = time.perf_counter()
-    calibrated = calibrate_synthesis({label: sims.pop(label) for label in calibration if label in sims}, rig, tests / "calibration", work)
+    calibrated = calibrated_h({label: sims.pop(label) for label in calibration if label in sims}, rig, tests / "calibration", work)
     calibrating = time.perf_counter() - t0
     takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work) for label, sim in sims.items()}
     for label in ("dialog_walk", "dialog_run", "platform_8hz"):

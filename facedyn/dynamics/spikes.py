@@ -49,40 +49,41 @@ def replace_spikes(trajectories: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     replaced = np.zeros(x.shape[:2], dtype=bool)
     if len(x) < 5:
         return x, replaced
-    distance, threshold = _spike_distance(x)
+    _, distance, threshold = _spike_distance(x)
     dropped = np.mean(distance > threshold, axis=1) > 0.5
     dropped[[0, -1]] = False
     if dropped.any():
         x = bridge_dropped(x, ~dropped)
         replaced[dropped] = True
     for _ in range(PASSES):
-        distance, threshold = _spike_distance(x)
+        predicted, distance, threshold = _spike_distance(x)
         spikes = (distance > threshold) & (distance >= maximum_filter1d(distance, 5, axis=0))
         if not spikes.any():
             break
-        x[spikes] = _cubic_from_neighbours(x)[spikes]
+        x[spikes] = predicted[spikes]
         replaced |= spikes
     return x, replaced
 
 
-def _spike_distance(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(F, S) distance of every sample from its neighbours' cubic, and the distance above which it is a spike."""
-    distance = np.linalg.norm(x - _cubic_from_neighbours(x), axis=-1)
+def _spike_distance(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(every sample as its neighbours' cubic predicts it, (F, S) distance from that
+    prediction, the distance above which a sample is a spike)."""
+    predicted = _cubic_from_neighbours(x)
+    distance = np.linalg.norm(x - predicted, axis=-1)
     # the end frames predict themselves (distance 0): the typical distance near them comes
     # from the frames inside, mirrored
     inner = np.concatenate([distance[2:3], distance[1:-1], distance[-3:-2]])
     typical = median_filter(inner, size=(2 * LOCAL_FRAMES + 1, 1), mode="mirror")
-    return distance, np.maximum(SPIKE_FACTOR * typical, FLOOR_CM)
+    return predicted, distance, np.maximum(SPIKE_FACTOR * typical, FLOOR_CM)
 
 
 def _cubic_from_neighbours(x: np.ndarray) -> np.ndarray:
-    """Each frame as the cubic through the two frames on each side predicts it; the second
+    """Each frame (of five or more) as the cubic through the two frames on each side predicts it; the second
     frame from an end from the cubic through the end frame and the three on its inner side.
     The end frames themselves predict themselves (never spikes: extrapolating to them would
     read a fast oscillation as one)."""
     p = x.copy()
     p[2:-2] = (-x[:-4] + 4.0 * x[1:-3] + 4.0 * x[3:-1] - x[4:]) / 6.0
-    if len(x) >= 5:
-        p[1] = 0.25 * x[0] + 1.5 * x[2] - x[3] + 0.25 * x[4]
-        p[-2] = 0.25 * x[-1] + 1.5 * x[-3] - x[-4] + 0.25 * x[-5]
+    p[1] = 0.25 * x[0] + 1.5 * x[2] - x[3] + 0.25 * x[4]
+    p[-2] = 0.25 * x[-1] + 1.5 * x[-3] - x[-4] + 0.25 * x[-5]
     return p

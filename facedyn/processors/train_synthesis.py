@@ -67,20 +67,19 @@ class TrainSynthesisProcessor(Processor):
             face = quasistatic.face  # H uses F's samples and landmarks
         calibrated = None if params["calibrate"] is None else calibration_model(params["calibrate"], first, frame)
         description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes),
-                       "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": params["epochs"],
+                       "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": epochs_of(params, calibrated),
                        "actor": frame.get("actor"), "calibrate": None if calibrated is None else str(params["calibrate"])}
         return Plan(description, (request, takes, quasistatic, face, frame, calibrated))
 
     def run(self, plan: Plan, progress: Progress) -> FileOutput:
         from facedyn.dynamics.modelfile import save_model
         from facedyn.dynamics.skull_motion import NAMED
-        from facedyn.dynamics.synthesis import CALIBRATION_EPOCHS, EPOCHS, calibrate_synthesis, synthesis_config, train_synthesis
+        from facedyn.dynamics.synthesis import calibrate_synthesis, synthesis_config, train_synthesis
         from facedyn.dynamics.training import TrainingSequence
 
         request, takes, quasistatic, face, frame, calibrated = plan.state
         params = request.params
-        epochs = params["epochs"] or (EPOCHS if calibrated is None else CALIBRATION_EPOCHS)
-        config = synthesis_config(epochs=epochs, validation=validation_names(params), seed=params["seed"],
+        config = synthesis_config(epochs=epochs_of(params, calibrated), validation=validation_names(params), seed=params["seed"],
                                   device=params["device"], skull_motion=NAMED[params["skull_features"]])
         sequences = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
         if calibrated is None:
@@ -95,6 +94,13 @@ class TrainSynthesisProcessor(Processor):
         record.update(skull=params["skull"], inputs=[str(p) for p in request.inputs], quasistatic=params["quasistatic"])
         summary = {**training_summary(model, takes, face if calibrated is None else calibrated.face, last), "quasistatic": params["quasistatic"]}
         return FileOutput(partial(save_model, model), summary)
+
+
+def epochs_of(params: dict, calibrated) -> int:
+    """--epochs, else the paper's 30 for a new H and CALIBRATION_EPOCHS for a calibration."""
+    from facedyn.dynamics.synthesis import CALIBRATION_EPOCHS, EPOCHS
+
+    return params["epochs"] or (EPOCHS if calibrated is None else CALIBRATION_EPOCHS)
 
 
 def calibration_model(path: Path, first, frame: dict):
