@@ -2,7 +2,7 @@
 
 Training, all through the console as a studio runs it (the built-in face, written as a
 UsdSkel rig so that `synth --rig` and `actor --from rig` read the same file):
-  usdfacedyn synth --rig rig.usda --scale demo --randomize-tissue take --extra-motions --noise 0.01 --data DATA
+  usdfacedyn synth --rig rig.usda --scale demo --randomize-tissue take --extra-motions --impacts --noise 0.01 --data DATA
   usdfacedyn actor rig.usda                          (the actor frame: the rig's own space)
   usdfacedyn train-removal   (three F variants, equal budgets: --epochs/--subsample below)
       F_truth_acc: true dynamics, landmark accelerations over t-30..t+10, sample positions,
@@ -126,7 +126,7 @@ def train(work: Path, rig_path: Path, args) -> dict:
         seconds[name] = round(time.perf_counter() - t0, 1)
 
     step("synth", "synth", "-o", str(work / "corpus"), "--rig", str(rig_path), "--scale", "demo", "--randomize-tissue", "take",
-         "--extra-motions", "true", "--noise", "0.01", "--data", str(DATA), "--jobs", str(args.jobs))
+         "--extra-motions", "true", "--impacts", "true", "--noise", "0.01", "--data", str(DATA), "--jobs", str(args.jobs))
     step("actor", "actor", str(rig_path), "-o", str(work / "actor.usda"))
     budget = ("--epochs", str(args.epochs), "--subsample", str(args.subsample), "--skull", "truth", "--device", "cpu")
     for name, (target, features, flags) in F_VARIANTS.items():
@@ -181,7 +181,7 @@ class TestTake:
 def calibration_specs(seconds: float, seed: int) -> dict[str, TakeSpec]:
     """An actor's calibration session: held expressions under motions none of the test takes
     use (platforms but not 8 Hz, a procedural walk, jump, dance and turn; no run, no hop)."""
-    return {name: TakeSpec(name, motion, expression, duration_s=seconds, seed=seed + 100 + k)
+    return {name: TakeSpec(name, motion, expression, duration_s=seconds, seed=seed + 100 + k, impacts=True)
             for k, (name, motion, expression) in enumerate(CALIBRATION)}
 
 

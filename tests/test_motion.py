@@ -224,3 +224,29 @@ def test_lowpass_keeps_gait_and_removes_jitter():
     assert np.percentile(filtered, 95) < 0.3 * np.percentile(raw, 95)
     with pytest.raises(ValueError, match="cutoff"):
         lowpass(walking, 80.0)
+
+
+@pytest.mark.parametrize("source", [motion.walk, motion.run, motion.hop, motion.dance, motion.turn, motion.jump],
+                         ids=["walk", "run", "hop", "dance", "turn", "jump"])
+def test_impacts_add_short_jolts_near_the_tissue_resonance(source):
+    """Foot contacts ring the head at 6-16 Hz for a cycle or two: a few tenths of a g to about a g,
+    millimetres of travel, continuous accelerations, the gait itself unchanged."""
+    smooth, jolted = source(6.0, 120.0, 3), source(6.0, 120.0, 3, impacts=True)
+    assert smooth.frame_count == jolted.frame_count
+    jolt = jolted.translate - smooth.translate
+    assert 0.01 < np.abs(jolt).max() < 2.0  # cm: the gait's path is kept
+    extra = motion.accelerations(jolted).linear_acceleration_world - motion.accelerations(smooth).linear_acceleration_world
+    gait = {motion.walk: motion._WALK, motion.run: motion._RUN, motion.hop: motion._HOP, motion.dance: motion._DANCE,
+            motion.turn: motion._TURN, motion.jump: motion._JUMP}[source]
+    assert 0.5 * gait.impact_g < np.abs(extra).max() / G < 3.0 * gait.impact_g
+    rate = np.abs(np.diff(extra, axis=0)).max() / G * 120.0  # g/s: a ringing, not a one-frame step
+    assert rate < 4 * np.pi * motion.IMPACT_HZ[1] * 2.0 * gait.impact_g
+    spectrum = np.abs(np.fft.rfft(extra[:, 1] * np.hanning(len(extra)))) ** 2
+    freqs = np.fft.rfftfreq(len(extra), 1 / 120.0)
+    in_band = spectrum[(freqs >= 4.0) & (freqs <= 20.0)].sum() / spectrum.sum()
+    assert in_band > 0.8
+    turned = np.degrees(quaternion.angle_between(smooth.orient, jolted.orient))
+    assert 0.01 < turned.max() < 3.0  # a small nod with each jolt
+    strength = np.convolve(np.linalg.norm(extra, axis=1), np.ones(12) / 12, mode="same")
+    assert 0.6 * gait.step_hz <= _dominant_hz(strength, 120.0) <= 1.4 * gait.step_hz  # one jolt per foot contact
+    np.testing.assert_array_equal(source(6.0, 120.0, 3, impacts=True).translate, jolted.translate)  # seeded

@@ -34,6 +34,7 @@ class SynthProcessor(Processor):
         Parameter("randomize_tissue", str, "none", "draw tissue parameters per take or once per corpus (the training "
                   "learns the physics family, not one model)", ("none", "take", "corpus")),
         Parameter("extra_motions", bool, False, "add dance, turn and jump takes (motions not fitted to the test mocap)"),
+        Parameter("impacts", bool, False, "gaits jolt at each foot contact (6-16 Hz transients, as real walking and hopping do)"),
     )
 
     def prepare(self, request: Request) -> Plan:
@@ -42,7 +43,7 @@ class SynthProcessor(Processor):
         params = request.params
         rig = load_rig(params["rig"], params["actor_seed"])
         specs = protocol(rig, params["scale"], params["data"], seed=params["seed"], noise_cm=params["noise"],
-                         physics=params["physics"], extra_motions=params["extra_motions"],
+                         physics=params["physics"], extra_motions=params["extra_motions"], impacts=params["impacts"],
                          randomize_tissue=None if params["randomize_tissue"] == "none" else params["randomize_tissue"])
         if params["only"]:
             specs = [s for s in specs if fnmatch.fnmatch(s.name, params["only"])]
@@ -58,7 +59,8 @@ class SynthProcessor(Processor):
         params = request.params
         description = {"scale": params["scale"], "rig": str(params["rig"] or "built-in"), "actor_seed": params["actor_seed"],
                        "noise_cm": params["noise"], "seed": params["seed"], "physics": params["physics"],
-                       "randomize_tissue": params["randomize_tissue"], "extra_motions": params["extra_motions"]}
+                       "randomize_tissue": params["randomize_tissue"], "extra_motions": params["extra_motions"],
+                       "impacts": params["impacts"]}
         index = build_corpus(request.output, rig, specs, progress=progress, description=description, jobs=params["jobs"])
         return FolderOutput({"takes": len(index["takes"]), "frames": index["frames"], "points": index["points"],
                              "simulated_frames_per_second": index["simulated_frames_per_second"], "jobs": params["jobs"]})

@@ -76,6 +76,7 @@ class TakeSpec:
     seed: int = 0
     noise_cm: float = 0.0
     platform_amplitude_cm: float = motion.PLATFORM_AMPLITUDE_CM
+    impacts: bool = False  # gaits jolt at each foot contact (facedyn.motion._contact_transients)
     # the take's own physics and actor (TissueParams or VolumetricParams); None: the corpus's
     tissue: TissueParams | VolumetricParams | None = None
 
@@ -107,7 +108,7 @@ def skull_motion(spec: TakeSpec) -> motion.SkullTrajectory:
     if kind == "still":
         return motion.still(**common)
     if kind in ("walk", "run", "hop") + EXTRA_MOTIONS:
-        return getattr(motion, kind)(**common)
+        return getattr(motion, kind)(**common, impacts=spec.impacts)
     if kind == "platform":
         try:
             hz = float(arg.lower().removesuffix("hz"))
@@ -227,6 +228,7 @@ def protocol(
     physics: str = "tissue",
     randomize_tissue: str | None = None,
     extra_motions: bool = False,
+    impacts: bool = False,
 ) -> list[TakeSpec]:
     """The capture protocol at a scale: 'standard' (the paper's) or 'demo' (a quick subset).
 
@@ -237,13 +239,16 @@ def protocol(
     gives every take VolumetricParams()), 'corpus' draws one random actor from `seed`,
     'take' one per take from the take's seed, so a corpus is the same whatever the number
     of workers. `extra_motions` adds the held expressions under EXTRA_MOTIONS (dance,
-    turn, jump), training sources not tuned to the test takes' mocap.
+    turn, jump), training sources not tuned to the test takes' mocap; `impacts` makes every
+    gait jolt at its foot contacts, as real walking and hopping do (facedyn.motion).
     """
     if physics not in PHYSICS:
         raise ValueError(f"physics must be one of {', '.join(PHYSICS)}, got {physics!r}")
     if randomize_tissue not in (None,) + RANDOMIZE:
         raise ValueError(f"randomize_tissue must be None, 'take' or 'corpus', got {randomize_tissue!r}")
     specs = _protocol_takes(rig, scale, data_dir, seed, noise_cm, extra_motions)
+    if impacts:
+        specs = [replace(spec, impacts=True) for spec in specs]
     params = PHYSICS[physics]
     if randomize_tissue == "take":
         return [replace(spec, tissue=params.random(spec.seed)) for spec in specs]

@@ -91,6 +91,18 @@ def test_extra_motions_are_training_takes_of_held_expressions():
         assert trajectory.frame_count == 240 and np.ptp(trajectory.translate, axis=0).max() > 1.0
 
 
+def test_impacts_jolt_every_gait_take_and_nothing_else():
+    rig = small_face()
+    plain = protocol(rig, "demo", extra_motions=True)
+    jolted = protocol(rig, "demo", extra_motions=True, impacts=True)
+    assert [replace(s, impacts=True) for s in plain] == jolted
+    gaits = ("walk", "run", "hop") + EXTRA_MOTIONS
+    for before, after in zip(plain, jolted):
+        a, b = skull_motion(before), skull_motion(after)
+        changed = not np.array_equal(a.translate, b.translate)
+        assert changed == (before.motion in gaits), before.name
+
+
 def test_tissue_layouts_vary_the_springs_over_the_face():
     rig = small_face()
     params = TissueParams.random(4)
