@@ -14,7 +14,8 @@ minimum-jerk profiles, about one a second, never faster than LOOK_MAX_DEG_S, as 
 mocap of walking and hopping shows (CMU subject 131: 95th percentile 100-300 deg/s, peaks
 ~400 deg/s); the rotational loads they cause are a large part of real secondary dynamics.
 Each take draws its amplitudes, phases, turns and a slow tempo drift from ``seed``, so
-takes differ but repeat exactly.
+takes differ but repeat exactly. With ``impacts=True`` every foot contact also jolts the
+head: a short transient ringing at 6-16 Hz (`_contact_transients`), as real gaits do.
 """
 from __future__ import annotations
 
@@ -334,9 +335,10 @@ def _contact_transients(times, phase, contact, impact_g, envelope, rng) -> tuple
 
     Why: a foot strike is a shock that the legs, spine and neck pass on to the head as a
     transient of a few tenths of a g (walking) to a g or more (running, landing), ringing at
-    6-16 Hz (rising over a cycle or two, dying out over a few more), with a nod. Smooth sinusoidal gaits have almost no head
-    acceleration above 5 Hz, where the face's soft tissue resonates, while real mocap of
-    walking and hopping has a fifth to a third of its acceleration power there. Each jolt
+    6-16 Hz (rising over a cycle or two, dying out over a few more), with a nod. Smooth
+    sinusoidal gaits have almost no head acceleration at 6-15 Hz, where the face's soft
+    tissue resonates, while real mocap of walking and hopping has a quarter to a third of
+    its angular acceleration power there (benchmarks/bench_motion_spectrum.py). Each jolt
     draws its frequency, damping, direction (mostly vertical) and size (0.5-2 x impact_g,
     log-uniform: shoes, ground and stride vary the shock several-fold);
     its displacement is a sine under a smooth envelope rising from zero, so accelerations
