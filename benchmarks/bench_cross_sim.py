@@ -29,7 +29,7 @@ no truth, no rest) and go through `import`, `stabilize --actor actor.usda`, `rem
 Calibration (the paper trains H per actor, on the actor's captures through F): each test
 actor also gives a calibration session, nine held expressions of 1.5 s under motions no test
 take uses (platforms at 6, 7, 9, 10 and 11 Hz, a procedural walk, jump, dance and head
-turns; no run, no hop, no 8 Hz), captured and stabilized as above, and
+turns, their gaits jolting at foot contacts as training's do; no run, no hop, no 8 Hz), captured and stabilized as above, and
   usdfacedyn train-synthesis CALIBRATION_TAKES --calibrate H.synthesis --quasistatic F_truth_acc.removal
 goes on training the family's H on them (100 epochs; no truth: F's output is y(t)). Its
 synthesis is reported as H_calibrated beside the family's H.

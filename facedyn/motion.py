@@ -350,7 +350,7 @@ def _contact_transients(times, phase, contact, impact_g, envelope, rng) -> tuple
         hz, zeta = rng.uniform(*IMPACT_HZ), rng.uniform(0.3, 0.6)
         omega = 2 * np.pi * hz
         x = np.clip(times - times[k], 0.0, None) * omega * zeta / 2.0  # the envelope peaks at x = 1
-        shape = x * x * np.exp(2.0 * (1.0 - x)) * np.sin(omega * (times - times[k])) * (times >= times[k]) / omega**2
+        shape = x * x * np.exp(2.0 * (1.0 - x)) * np.sin(omega * (times - times[k])) / omega**2  # zero before the contact (x = 0)
         peak = impact_g * G_CM_S2 * np.exp(rng.uniform(np.log(0.5), np.log(2.0))) * envelope[k]
         direction = np.array([rng.uniform(-0.3, 0.3), -rng.uniform(0.6, 1.0), rng.uniform(-0.5, 0.5)])
         nod = np.array([rng.uniform(-1.0, 1.0), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5)])

@@ -105,10 +105,7 @@ def train_synthesis(
     device = resolve_device(config.device)
     store, described, fps = store_takes(takes, lambda take: _prepare(take, face, nb, lengths, quasistatic, config, backend, skull_motion), scratch)
     with store:
-        if isinstance(quasistatic, Mapping):
-            extra = sorted(set(quasistatic) - {d["name"] for d in described})
-            if extra:
-                raise ValueError(f"quasistatic shapes must be given for exactly the takes: not a take {extra}")
+        _check_given_names(quasistatic, described)
         train, val = split_store(store, described, config, 1, lambda a: FrameSet(a["inputs"], a["targets"], device))
         names = [d["name"] for d in described if not d["validation"]]
         spec = NetworkSpec(store.columns["inputs"][0], SYNTHESIS_HIDDEN, store.columns["targets"][0])
@@ -121,7 +118,7 @@ def train_synthesis(
             "takes": described,
             "train_frames": len(train),
             "quasistatic_source": source,
-            "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()},
+            "config": _config_json(config),
             "device": str(device),
         },
         "validation": errors,
@@ -167,13 +164,13 @@ def calibrate_synthesis(
     with store:
         if abs(fps - model.fps) > 1e-6 * model.fps:
             raise ValueError(f"the takes run at {fps:g} fps, the synthesis model at {model.fps:g}; a model serves one rate")
+        _check_given_names(quasistatic, described)
         train, val = split_store(store, described, config, 1, lambda a: FrameSet(a["inputs"], a["targets"], device))
         curve = fit(network, train, val, config, progress)
         errors = offset_errors(network, val, config.batch_size, "frames") if val is not None else None
     network.cpu()
     calibration = {"takes": described, "train_frames": len(train), "quasistatic_source": source, "device": str(device),
-                   "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()},
-                   "loss_curve": curve}
+                   "config": _config_json(config), "loss_curve": curve}
     info = {**model.info, "calibration": calibration, "validation": errors}
     return DynamicsModel(kind="synthesis", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
                          arrays=dict(model.arrays), skull_motion=model.skull_input)
@@ -291,6 +288,19 @@ def _neighbourhoods(value, face: FaceSetup) -> UVNeighbourhoods:
     if value.vertices.max() >= face.point_count:
         raise ValueError(f"the stretch neighbourhoods use vertex {value.vertices.max()}, the face has {face.point_count}")
     return value
+
+
+def _check_given_names(quasistatic, described: list[dict]) -> None:
+    """Given quasistatic shapes must name only the takes (each take was checked to have its own as it came)."""
+    if isinstance(quasistatic, Mapping):
+        extra = sorted(set(quasistatic) - {d["name"] for d in described})
+        if extra:
+            raise ValueError(f"quasistatic shapes must be given for exactly the takes: not a take {extra}")
+
+
+def _config_json(config: TrainConfig) -> dict:
+    """The training settings as the model's info keeps them."""
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()}
 
 
 def _source_description(quasistatic) -> dict:

@@ -33,8 +33,8 @@ from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import Network, NetworkSpec, removal_spec, resolve_device
 from facedyn.dynamics.removal import SAMPLE_POSITIONS, sample_positions, skin_inputs
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
-from facedyn.dynamics.spikes import replace_spikes
 from facedyn.dynamics.skull_motion import SkullMotionInput
+from facedyn.dynamics.spikes import replace_spikes
 from facedyn.dynamics.store import StreamedExamples, TrainingStore
 from facedyn.dynamics.targets import TARGET_WINDOW, dynamic_offsets
 from facedyn.performance import Performance
