@@ -33,6 +33,15 @@ turns, their gaits jolting at foot contacts as training's do; no run, no hop, no
   usdfacedyn train-synthesis CALIBRATION_TAKES --calibrate H.synthesis --quasistatic F_truth_acc.removal
 goes on training the family's H on them (100 epochs; no truth: F's output is y(t)). Its
 synthesis is reported as H_calibrated beside the family's H.
+Tissue band (`--soft-hz-bands`, default 5-6.5 and 7.5-9 Hz): the recommended F is trained
+once more per band, each on its own corpus (`synth ... --soft-hz BAND`: the same protocol and
+seeds, the tissue's soft frequency drawn from the band; the same budget), and each test actor
+keeps the candidate (the family's F or a band's) that leaves its held expressions most alike
+across motions on its calibration session (`evaluate --held-expression --removal F` on the
+session's two pairs of takes that hold one expression: smile on the 6 Hz platform and
+dancing, jaw open on the 10 Hz platform and turning; no truth). Removal cases report every
+candidate (``F_truth_acc_<candidate>_solved``: the family's equals ``F_truth_acc_solved``)
+and the chosen one (``F_truth_acc_chosen_on_session_solved``).
 Retargeting (A -> B, both volumetric test actors of a group, one topology): A's dialog
 under CMU hopping, captured and processed as above (A's take with its quasistatic layer),
 retargeted onto B's dialog under walking (B's quasistatic layer) with `usdfacedyn retarget`
@@ -86,6 +95,7 @@ DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TRACKER = TrackerNoise(iid_cm=0.01, temporal_cm=0.004, spatial_cm=0.002, pop_rate=1.0, pop_cm=0.3, drop_rate=0.01)
 ACTOR_SEEDS = (1801, 1802, 1803, 1804)  # VolumetricParams.random seeds: no training take draws volumetric tissue
 HELD_OUT_SEEDS = (1901, 1902, 1903, 1904)  # never simulated while the training family was tuned (final figures only)
+SOFT_HZ_BANDS = ("5-6.5", "7.5-9")  # synth --soft-hz: the family's low and high ends, beside the whole 5-9 Hz
 TEST_SPEECH_TAKES = "dialog_walk,dialog_hop"  # the corpus's Live Link takes of the test takes' speech
 RECOMMENDED_INPUTS = ("--sample-positions", "true", "--batch-size", "2000", "--exclude", TEST_SPEECH_TAKES)
 F_VARIANTS = {  # name: (train-removal --target, --skull-features, its other flags)
@@ -125,16 +135,67 @@ def train(work: Path, rig_path: Path, args) -> dict:
         usdfacedyn(*command)
         seconds[name] = round(time.perf_counter() - t0, 1)
 
-    step("synth", "synth", "-o", str(work / "corpus"), "--rig", str(rig_path), "--scale", "demo", "--randomize-tissue", "take",
-         "--extra-motions", "true", "--impacts", "true", "--noise", "0.01", "--data", str(DATA), "--jobs", str(args.jobs))
+    step("synth", "synth", "-o", str(work / "corpus"), *corpus_flags(rig_path, args))
     step("actor", "actor", str(rig_path), "-o", str(work / "actor.usda"))
-    budget = ("--epochs", str(args.epochs), "--subsample", str(args.subsample), "--skull", "truth", "--device", "cpu")
     for name, (target, features, flags) in F_VARIANTS.items():
         step(name, "train-removal", str(work / "corpus"), "-o", str(work / f"{name}.removal"), "--target", target,
-             "--skull-features", features, *flags, *budget)
+             "--skull-features", features, *flags, *f_budget(args))
     step("H", "train-synthesis", str(work / "corpus"), "-o", str(work / "H.synthesis"), "--quasistatic", str(work / f"{RECOMMENDED}.removal"),
          "--epochs", str(args.h_epochs), "--skull", "truth", "--exclude", TEST_SPEECH_TAKES, "--device", "cpu")
     return seconds
+
+
+def corpus_flags(rig_path: Path, args) -> tuple[str, ...]:
+    return ("--rig", str(rig_path), "--scale", "demo", "--randomize-tissue", "take", "--extra-motions", "true", "--impacts", "true",
+            "--noise", "0.01", "--data", str(DATA), "--jobs", str(args.jobs))
+
+
+def f_budget(args) -> tuple[str, ...]:
+    return ("--epochs", str(args.epochs), "--subsample", str(args.subsample), "--skull", "truth", "--device", "cpu")
+
+
+def band_model(work: Path, band: str) -> Path:
+    return work / f"{RECOMMENDED}_soft{band}.removal"
+
+
+def band_paths(work: Path, args) -> dict[str, Path]:
+    """The candidate recommended F's by name: the family's and one per --soft-hz band."""
+    return {"family": work / f"{RECOMMENDED}.removal", **{f"soft{b}": band_model(work, b) for b in args.soft_hz_bands}}
+
+
+def train_bands(work: Path, rig_path: Path, args) -> dict:
+    """The recommended F once more per --soft-hz band (its own corpus: the same protocol and
+    seeds, tissue drawn from the band; the same budget); models already in `work` are kept."""
+    seconds = {}
+    for band in args.soft_hz_bands:
+        if band_model(work, band).is_file():
+            continue
+        t0 = time.perf_counter()
+        usdfacedyn("synth", "-o", str(work / f"corpus_soft{band}"), *corpus_flags(rig_path, args), "--soft-hz", band)
+        target, features, flags = F_VARIANTS[RECOMMENDED]
+        usdfacedyn("train-removal", str(work / f"corpus_soft{band}"), "-o", str(band_model(work, band)), "--target", target,
+                   "--skull-features", features, *flags, *f_budget(args))
+        seconds[band] = round(time.perf_counter() - t0, 1)
+    return seconds
+
+
+def choose_removal(roots: dict[str, Path], candidates: dict[str, Path], folder: Path) -> tuple[str, dict]:
+    """The candidate F that leaves the actor's held expressions most alike across motions, no
+    truth: `usdfacedyn evaluate --held-expression --removal F` on each pair of calibration
+    takes holding one expression; (its name, every candidate's mean spread ratio)."""
+    pairs = [[roots[label] for label, _, expression in CALIBRATION if expression == shared and label in roots]
+             for shared in ("smile", "jaw_open")]
+    pairs = [pair for pair in pairs if len(pair) == 2]
+    ratios = {}
+    for name, model in candidates.items():
+        ratio = []
+        for k, pair in enumerate(pairs):
+            out = folder / f"evaluate_{name}_{k}"
+            usdfacedyn("evaluate", *map(str, pair), "--held-expression", "true", "--removal", str(model), "-o", str(out))
+            ratio.append(json.loads((out / "report.json").read_text())["held_expression"]["per_frame_ratio"])
+        ratios[name] = round(float(np.mean(ratio)), 4) if ratio else None
+    scored = {name: r for name, r in ratios.items() if r is not None}
+    return (min(scored, key=scored.get) if scored else "family"), ratios
 
 
 def plain_capture(sim, rig, folder: Path, actor: Path):
@@ -185,12 +246,11 @@ def calibration_specs(seconds: float, seed: int) -> dict[str, TakeSpec]:
             for k, (name, motion, expression) in enumerate(CALIBRATION)}
 
 
-def calibrated_h(sims: dict, rig, folder: Path, work: Path) -> Path:
-    """H calibrated on the actor's calibration captures through the console (plain captures,
-    stabilized with the actor; F gives their quasistatic shapes): the model file."""
-    roots = [plain_capture(sim, rig, folder / label, work / "actor.usda")[0] for label, sim in sims.items()]
+def calibrated_h(roots: dict[str, Path], folder: Path, work: Path) -> Path:
+    """H calibrated on the actor's calibration captures (plain captures, stabilized with the
+    actor) through the console; F gives their quasistatic shapes: the model file."""
     model = folder / "H_calibrated.synthesis"
-    usdfacedyn("train-synthesis", *map(str, roots), "-o", str(model), "--calibrate", str(work / "H.synthesis"),
+    usdfacedyn("train-synthesis", *map(str, roots.values()), "-o", str(model), "--calibrate", str(work / "H.synthesis"),
                "--quasistatic", str(work / f"{RECOMMENDED}.removal"), "--device", "cpu")
     return model
 
@@ -199,7 +259,7 @@ def score(estimate, truth, fv) -> float:
     return round(residual_fraction(estimate, truth, truth, fv)["fraction"], 3)
 
 
-def removal_case(actor_name: str, label: str, take: TestTake, models: dict, fv) -> dict:
+def removal_case(actor_name: str, label: str, take: TestTake, models: dict, fv, bands: dict, chosen: str) -> dict:
     truth = take.truth.offsets
     solved = take.stabilized.points
     result = {"case": "removal", "actor": actor_name, "test": label, "frames": len(truth),
@@ -209,6 +269,10 @@ def removal_case(actor_name: str, label: str, take: TestTake, models: dict, fv) 
         result[f"{name}_solved"] = score(performance.offsets, truth, fv)
         _, offsets = remove_dynamics(take.tracked_true_skull, take.truth.skull_translate, take.truth.skull_orient, take.truth.fps, models[name])
         result[f"{name}_true_skull_upper_bound"] = score(offsets, truth, fv)
+    for name, model in bands.items():  # the family's F among them: its figure equals F_truth_acc_solved (the console's remove)
+        result[f"{RECOMMENDED}_{name}_solved"] = score(remove_dynamics(solved, *take.stabilized.skull(), take.stabilized.fps, model)[1], truth, fv)
+    if bands:
+        result[f"{RECOMMENDED}_chosen_on_session_solved"] = result[f"{RECOMMENDED}_{chosen}_solved"]
     return result
 
 
@@ -277,9 +341,11 @@ def simulate_tests(rig, specs: dict[str, TakeSpec], params: VolumetricParams, jo
     return sims
 
 
-def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path, models: dict, h_model, args, started: float) -> tuple[str, VolumetricParams, dict, Path]:
+def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path, models: dict, bands: dict, h_model, args,
+              started: float) -> tuple[str, VolumetricParams, dict, Path]:
     """One volumetric actor's calibration and test takes through the console, and its cases;
-    (name, tissue, test takes, its calibrated H)."""
+    (name, tissue, test takes, its calibrated H). `bands`: candidate recommended F's by name
+    ("family" and one per --soft-hz band), one chosen per actor on its calibration session."""
     fv = rig.face_vertices
     params = VolumetricParams.random(seed, substeps=2)  # one step per frame diverges on CMU hopping for some actors
     actor_name = f"volumetric_{seed}"
@@ -294,12 +360,17 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
     simulated = time.perf_counter() - t0
     tests = scratch / actor_name  # test takes are never kept: a rerun simulates them afresh
     t0 = time.perf_counter()
-    calibrated = calibrated_h({label: sims.pop(label) for label in calibration if label in sims}, rig, tests / "calibration", work)
+    roots = {label: plain_capture(sims.pop(label), rig, tests / "calibration" / label, work / "actor.usda")[0]
+             for label in calibration if label in sims}
+    calibrated = calibrated_h(roots, tests / "calibration", work)
     calibrating = time.perf_counter() - t0
+    chosen, ratios = choose_removal(roots, band_paths(work, args), tests / "calibration") if bands else (None, {})
+    if bands:
+        emit(case="tissue band chosen on the calibration session", actor=actor_name, **tag, chosen=chosen, held_expression_spread_ratio=ratios)
     takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work) for label, sim in sims.items()}
     for label in ("dialog_walk", "dialog_run", "platform_8hz"):
         if label in takes:
-            emit(**removal_case(actor_name, label, takes[label], models, fv), **tag)
+            emit(**removal_case(actor_name, label, takes[label], models, fv, bands, chosen), **tag)
     if "dialog_hop" in takes:
         takes["dialog_hop"].synthesized["H_calibrated"] = takes["dialog_hop"].synthesize(calibrated, "synthesized.calibrated.usdc")
         emit(**synthesis_case(actor_name, takes["dialog_hop"], h_model, fv), **tag)
@@ -318,6 +389,9 @@ def main() -> None:
     parser.add_argument("--subsample", type=float, default=0.5, help="fraction of pairs per epoch, every F variant")
     parser.add_argument("--h-epochs", type=int, default=20)
     parser.add_argument("--seconds", type=float, default=1.5, help="length of each test take")
+    parser.add_argument("--soft-hz-bands", type=lambda text: [b for b in text.split(",") if b], default=list(SOFT_HZ_BANDS),
+                        help="comma-separated synth --soft-hz bands: the recommended F trained once more per band, one of "
+                        "them or the family's chosen per actor on its calibration session ('' for none)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--work", type=Path, help="keep the corpus, actor and models in this folder and reuse them when there "
                         "(a rerun tests again without training; default: a temporary folder)")
@@ -337,16 +411,18 @@ def main() -> None:
             seconds = "reused from an earlier run in --work"
         else:
             seconds = train(work, write_blendshape_rig(rig, work / "rig.usda"), args)
+        band_seconds = train_bands(work, work / "rig.usda", args)
         corpus = json.loads((work / "corpus" / "corpus.json").read_text())
         trained = [t for t in corpus["takes"] if t["name"] not in TEST_SPEECH_TAKES.split(",")]
         emit(case="training", simulator="facedyn.sim.tissue, random TissueParams per take", rig=rig.name,
              takes=len(trained), frames=int(sum(t.get("frames", 0) for t in trained)), f_epochs=args.epochs, f_subsample=args.subsample,
-             h_epochs=args.h_epochs, seconds=seconds, budget="every F variant: the same epochs and subsample fraction; the paper's F without the talking takes")
+             h_epochs=args.h_epochs, seconds=seconds, soft_hz_bands=args.soft_hz_bands, band_seconds=band_seconds or "reused", budget="every F variant: the same epochs and subsample fraction; the paper's F without the talking takes")
         models = {name: load_model(work / f"{name}.removal") for name in F_VARIANTS}
         h_model = load_model(work / "H.synthesis")
+        bands = {name: load_model(path) for name, path in band_paths(work, args).items()} if args.soft_hz_bands else {}
         groups = [(False, ACTOR_SEEDS[: args.actors]), (True, HELD_OUT_SEEDS[: args.held_out_actors])]
         for held_out, seeds in groups:
-            actors = [run_actor(seed, k, held_out, rig, work, Path(scratch), models, h_model, args, started) for k, seed in enumerate(seeds)]
+            actors = [run_actor(seed, k, held_out, rig, work, Path(scratch), models, bands, h_model, args, started) for k, seed in enumerate(seeds)]
             for (a_name, _, a_takes, _), (b_name, b_params, b_takes, b_calibrated) in zip(actors[:-1], actors[1:]):
                 if "dialog_hop" not in a_takes or "dialog_walk" not in b_takes:
                     continue  # reported as diverged above

@@ -8,20 +8,25 @@ fraction of the capture's motion left at the skull's frequency (a platform take'
 frequency: give one training never saw for a held-out check), and with `--synthesis`
 the re-synthesis residual against the capture. With `--held-expression`, the takes hold
 one expression under different motions: the spread of its shape after removal against
-the spread of the capture.
+the spread of the capture. With `--removal MODEL`, the takes are read as `remove` reads them
+(stabilized) and that model's removal is evaluated, in memory: candidate models compare on
+one session without attaching (or writing) any layer.
 """
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from facedyn.errors import UsageError
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
+from facedyn.processors.remove import check_skull_frame
 from facedyn.progress import Progress
 
 QUASISTATIC_BELOW = "synthesized"  # evaluate reads what remove wrote: everything below the synthesized role
+REMOVAL_READS = "quasistatic"  # with --removal, evaluate reads what remove reads: everything below its own role
 MAX_FRAMES = 10_000  # frames of a take evaluate reads (whole, for its spectra): about 2 GB at 4,000 points
 
 
@@ -38,6 +43,8 @@ class EvaluateProcessor(Processor):
         Parameter("frequency", float, None, "the frequency (Hz) whose residual to report (default: the skull motion's peak)",
                   above=0.0, maximum=1000.0, metavar="HZ"),
         Parameter("synthesis", Path, None, "a synthesis model: also re-synthesize each take under its own motion", metavar="MODEL"),
+        Parameter("removal", Path, None, "evaluate this removal model on the stabilized takes instead of the removal they "
+                  "carry (nothing is written to them)", metavar="MODEL"),
     )
 
     def prepare(self, request: Request) -> Plan:
@@ -49,9 +56,17 @@ class EvaluateProcessor(Processor):
             raise UsageError("give at least one TAKE")
         params = request.params
         takes = []
+        removal = None
+        reads = QUASISTATIC_BELOW if params["removal"] is None else REMOVAL_READS
         for path in request.inputs:
-            check_length(path, request.frames)
-            perf, _ = read_take_below(path, QUASISTATIC_BELOW, frames=request.frames)
+            check_length(path, reads, request.frames)
+            if params["removal"] is None:
+                perf, _ = read_take_below(path, QUASISTATIC_BELOW, frames=request.frames)
+            else:
+                perf, _ = read_take_below(path, REMOVAL_READS, frames=request.frames)
+                removal = removal or removal_model(params["removal"], perf)
+                check_skull_frame(path, perf, params["removal"], removal)
+                perf = removed_by(perf, removal)
             if perf.offsets is None:
                 raise TakeError(f"{path}: no removed offsets (primvars:facedyn:dynamicsOffset); run `usdfacedyn remove` first")
             if perf.frame_count < 8:
@@ -68,7 +83,8 @@ class EvaluateProcessor(Processor):
             if model.kind != "synthesis":
                 raise UsageError(f"--synthesis {params['synthesis']}: a {model.kind} model; this needs a synthesis model")
         description = {"takes": [str(p) for p, _ in takes], "frames": [p.frame_count for _, p in takes],
-                       "held_expression": params["held_expression"], "synthesis": str(params["synthesis"] or "")}
+                       "held_expression": params["held_expression"], "synthesis": str(params["synthesis"] or ""),
+                       "removal": str(params["removal"] or "the takes' own")}
         return Plan(description, (request, takes, model))
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
@@ -96,11 +112,29 @@ class EvaluateProcessor(Processor):
         return "\n".join(lines)
 
 
-def check_length(path: Path, frames) -> None:
-    """Refuse a selection longer than MAX_FRAMES before any frame is read."""
+def removal_model(path: Path, perf):
+    """The --removal model, checked to fit the takes (topology, frame rate) and to be a removal model."""
+    from facedyn.dynamics.modelfile import load_model
+
+    model = load_model(path, topology=perf.topology, fps=perf.fps)
+    if model.kind != "removal":
+        raise UsageError(f"--removal {path}: a {model.kind} model; this needs a removal model")
+    return model
+
+
+def removed_by(perf, model):
+    """The stabilized take as `remove` with `model` would leave it: quasistatic points and the removed offsets."""
+    from facedyn.dynamics.removal import remove_dynamics
+
+    quasistatic, offsets = remove_dynamics(perf.points, *perf.skull(), perf.fps, model)
+    return replace(perf, points=quasistatic, offsets=offsets)
+
+
+def check_length(path: Path, below: str, frames) -> None:
+    """Refuse a selection longer than MAX_FRAMES before any frame is read (of the take below the role `below`)."""
     from facedyn.usd.frames import TakeFrames
 
-    count = TakeFrames(path, QUASISTATIC_BELOW, frames=frames).frame_count
+    count = TakeFrames(path, below, frames=frames).frame_count
     if count > MAX_FRAMES:
         raise UsageError(f"{path}: {count} frames selected; evaluate reads at most {MAX_FRAMES:,} frames of a take "
                          "whole (its spectra and spreads): choose a range with --frames FIRST:LAST")

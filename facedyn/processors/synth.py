@@ -35,16 +35,21 @@ class SynthProcessor(Processor):
                   "learns the physics family, not one model)", ("none", "take", "corpus")),
         Parameter("extra_motions", bool, False, "add dance, turn and jump takes (motions not fitted to the test mocap)"),
         Parameter("impacts", bool, False, "gaits jolt at each foot contact (6-16 Hz transients, as real walking and hopping do)"),
+        Parameter("soft_hz", str, "", "draw the randomized tissue's soft frequency from this band (default: the family's "
+                  "5-9 Hz), e.g. an actor's band", metavar="LOW-HIGH"),
     )
 
     def prepare(self, request: Request) -> Plan:
         from facedyn.sim.corpus import protocol
 
         params = request.params
+        band = soft_hz_band(params["soft_hz"])
+        if band is not None and params["randomize_tissue"] == "none":
+            raise UsageError("--soft-hz sets the band randomized tissue is drawn from: add --randomize-tissue take (or corpus)")
         rig = load_rig(params["rig"], params["actor_seed"])
         specs = protocol(rig, params["scale"], params["data"], seed=params["seed"], noise_cm=params["noise"],
                          physics=params["physics"], extra_motions=params["extra_motions"], impacts=params["impacts"],
-                         randomize_tissue=None if params["randomize_tissue"] == "none" else params["randomize_tissue"])
+                         randomize_tissue=None if params["randomize_tissue"] == "none" else params["randomize_tissue"], soft_hz=band)
         if params["only"]:
             specs = [s for s in specs if fnmatch.fnmatch(s.name, params["only"])]
             if not specs:
@@ -60,10 +65,24 @@ class SynthProcessor(Processor):
         description = {"scale": params["scale"], "rig": str(params["rig"] or "built-in"), "actor_seed": params["actor_seed"],
                        "noise_cm": params["noise"], "seed": params["seed"], "physics": params["physics"],
                        "randomize_tissue": params["randomize_tissue"], "extra_motions": params["extra_motions"],
-                       "impacts": params["impacts"]}
+                       "impacts": params["impacts"], "soft_hz": params["soft_hz"] or "the family's"}
         index = build_corpus(request.output, rig, specs, progress=progress, description=description, jobs=params["jobs"])
         return FolderOutput({"takes": len(index["takes"]), "frames": index["frames"], "points": index["points"],
                              "simulated_frames_per_second": index["simulated_frames_per_second"], "jobs": params["jobs"]})
+
+
+def soft_hz_band(text: str) -> tuple[float, float] | None:
+    """--soft-hz LOW-HIGH as (low, high) Hz; None when not given."""
+    if not text:
+        return None
+    low, sep, high = text.partition("-")
+    try:
+        band = (float(low), float(high)) if sep else None
+    except ValueError:
+        band = None
+    if band is None or not (0 < band[0] <= band[1] < 1000):
+        raise UsageError(f"--soft-hz {text!r}: expected a band of frequencies LOW-HIGH in Hz with 0 < LOW <= HIGH, e.g. 7.5-9")
+    return band
 
 
 def load_rig(path: Path | None, actor_seed: int | None = None):

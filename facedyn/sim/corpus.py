@@ -229,6 +229,7 @@ def protocol(
     randomize_tissue: str | None = None,
     extra_motions: bool = False,
     impacts: bool = False,
+    soft_hz: tuple[float, float] | None = None,
 ) -> list[TakeSpec]:
     """The capture protocol at a scale: 'standard' (the paper's) or 'demo' (a quick subset).
 
@@ -241,6 +242,8 @@ def protocol(
     of workers. `extra_motions` adds the held expressions under EXTRA_MOTIONS (dance,
     turn, jump), training sources not tuned to the test takes' mocap; `impacts` makes every
     gait jolt at its foot contacts, as real walking and hopping do (facedyn.motion).
+    `soft_hz` (low, high) narrows the randomized tissue's soft frequency band (the family's
+    otherwise), e.g. to an actor's band measured on a calibration session.
     """
     if physics not in PHYSICS:
         raise ValueError(f"physics must be one of {', '.join(PHYSICS)}, got {physics!r}")
@@ -249,11 +252,14 @@ def protocol(
     specs = _protocol_takes(rig, scale, data_dir, seed, noise_cm, extra_motions)
     if impacts:
         specs = [replace(spec, impacts=True) for spec in specs]
+    if soft_hz is not None and randomize_tissue is None:
+        raise ValueError("a soft_hz band draws randomized tissue: it needs randomize_tissue 'take' or 'corpus'")
     params = PHYSICS[physics]
+    band = {} if soft_hz is None else {"soft_hz": soft_hz}
     if randomize_tissue == "take":
-        return [replace(spec, tissue=params.random(spec.seed)) for spec in specs]
+        return [replace(spec, tissue=params.random(spec.seed, **band)) for spec in specs]
     if randomize_tissue == "corpus":
-        actor = params.random(seed)
+        actor = params.random(seed, **band)
         return [replace(spec, tissue=actor) for spec in specs]
     if physics != "tissue":
         return [replace(spec, tissue=params()) for spec in specs]

@@ -109,6 +109,17 @@ class SimulationDiverged(FacedynError):
     """A simulation that blew up: the motion or the expression asks more of the step than it can integrate (a user's
     input, e.g. an extreme BVH, reported in one line, not a bug)."""
 
+SOFT_HZ = (5.0, 9.0)  # the training family's soft tissue frequencies (TissueParams.random)
+
+
+def check_band(band) -> tuple[float, float]:
+    """(low, high) Hz of a frequency band to draw from, checked."""
+    low, high = (float(v) for v in band)
+    if not (np.isfinite(low) and np.isfinite(high) and 0 < low <= high):
+        raise ValueError(f"a frequency band needs 0 < low <= high Hz, got {low:g}-{high:g}")
+    return low, high
+
+
 @dataclass(frozen=True)
 class TissueParams:
     """Physical and numerical constants of the tissue model (cm, s, Hz).
@@ -158,12 +169,13 @@ class TissueParams:
             raise ValueError(f"TissueParams.substeps must be a positive integer, got {self.substeps}")
 
     @classmethod
-    def random(cls, seed: int, **overrides) -> "TissueParams":
-        """A training actor's tissue drawn from `seed`: soft_hz 5-9 Hz, bone_hz 30-50 Hz,
+    def random(cls, seed: int, soft_hz: tuple[float, float] = SOFT_HZ, **overrides) -> "TissueParams":
+        """A training actor's tissue drawn from `seed`: soft_hz in the `soft_hz` band (5-9 Hz), bone_hz 30-50 Hz,
         damping ratio 0.15-0.35, coupling 0.6-1.4 cm, strain stiffening 1-6, spatial
         layouts of stiffness (log-sd 0.05-0.3) and density (0-0.2), a depth layout
         (depth_variation 0-1.6), expression inertia 0-1 and normal_ratio 1-4. `overrides`
-        replace drawn fields (e.g. substeps).
+        replace drawn fields (e.g. substeps). A narrower `soft_hz` band draws the same
+        actors otherwise (one uniform draw, mapped into the band).
 
         Why the last three ranges: facial soft tissue is 1.5-3 cm deep over the cheeks and
         under the jaw but 0.3-0.6 cm over the brow, nose and chin, so the part of the face
@@ -179,7 +191,7 @@ class TissueParams:
         """
         rng = np.random.default_rng([int(seed), 0x746973])  # "tis": another stream than the volumetric draws
         drawn = dict(
-            soft_hz=rng.uniform(5.0, 9.0), bone_hz=rng.uniform(30.0, 50.0), damping_ratio=rng.uniform(0.15, 0.35),
+            soft_hz=rng.uniform(*check_band(soft_hz)), bone_hz=rng.uniform(30.0, 50.0), damping_ratio=rng.uniform(0.15, 0.35),
             coupling_cm=rng.uniform(0.6, 1.4), strain_stiffening=rng.uniform(1.0, 6.0),
             stiffness_variation=rng.uniform(0.05, 0.3), density_variation=rng.uniform(0.0, 0.2),
             depth_variation=rng.uniform(0.0, 1.6), expression_inertia=rng.uniform(0.0, 1.0),

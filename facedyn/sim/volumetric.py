@@ -51,7 +51,7 @@ from scipy.sparse.csgraph import connected_components
 
 from facedyn.geometry import mesh
 from facedyn.sim import layout
-from facedyn.sim.tissue import SimulationDiverged, SkullMotion, single_threaded_blas, validate_inputs
+from facedyn.sim.tissue import SimulationDiverged, SkullMotion, check_band, single_threaded_blas, validate_inputs
 
 # A prism (three tetrahedra) thinner than this fraction of its ideal volume counts as folded.
 _MIN_QUALITY = 0.2
@@ -109,16 +109,16 @@ class VolumetricParams:
                 raise ValueError(f"VolumetricParams.{name} must be a positive integer, got {value}")
 
     @classmethod
-    def random(cls, seed: int, **overrides) -> "VolumetricParams":
+    def random(cls, seed: int, soft_hz: tuple[float, float] = (4.5, 8.0), **overrides) -> "VolumetricParams":
         """An actor drawn from the ranges of issue 18, independent of any TissueParams draw:
-        soft_hz 4.5-8 Hz (the built-in face rings about 15 % above its layer's soft_hz,
+        soft_hz in the `soft_hz` band, 4.5-8 Hz (the built-in face rings about 15 % above its layer's soft_hz,
         so 5-9 Hz in effect; tests/sim/test_volumetric.py measures it), soft depth 1.2-2.4 cm, depth over bone 0.3-0.6 cm, density
         0.95-1.1 g/cm^3, Poisson 0.42-0.47, damping ratio 0.12-0.35 at soft_hz,
         nonlinearity 0.5-4, and spatial layouts of stiffness (log-sd 0.1-0.4), density
         (0-0.15), viscosity (0-0.3) and depth (0-0.2). `overrides` replace drawn fields."""
         rng = np.random.default_rng([int(seed), 0x766F6C])  # "vol": another stream than tissue's draws
         drawn = dict(
-            soft_hz=rng.uniform(4.5, 8.0), thickness_cm=rng.uniform(1.2, 2.4), bone_thickness_cm=rng.uniform(0.3, 0.6),
+            soft_hz=rng.uniform(*check_band(soft_hz)), thickness_cm=rng.uniform(1.2, 2.4), bone_thickness_cm=rng.uniform(0.3, 0.6),
             density=rng.uniform(0.95, 1.1), poisson=rng.uniform(0.42, 0.47), damping_ratio=rng.uniform(0.12, 0.35),
             nonlinearity=rng.uniform(0.5, 4.0), stiffness_variation=rng.uniform(0.1, 0.4),
             density_variation=rng.uniform(0.0, 0.15), damping_variation=rng.uniform(0.0, 0.3),

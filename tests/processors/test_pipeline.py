@@ -293,3 +293,34 @@ def test_retarget_streams_in_chunks_that_equal_the_whole_take(corpus, tmp_path, 
         whole, chunked = _layer_points(tmp_path / f"{name}.whole.usdc"), _layer_points(tmp_path / f"{name}.chunked.usdc")
         assert len(whole) > 16 and whole.shape == chunked.shape
         np.testing.assert_allclose(chunked, whole, atol=1e-5)
+
+
+def test_evaluate_compares_a_removal_model_on_stabilized_takes_without_touching_them(corpus, tmp_path, capsys):
+    """`evaluate --removal F` reports what `remove` with F and then `evaluate` would (held
+    expression spread, per-take numbers) while leaving every take file as it was; a
+    synthesis model is refused as --removal."""
+    import json
+    import shutil
+
+    folder, models = corpus
+    roots = []
+    for name in ("jaw_open_platform10", "jaw_open_walk"):
+        take = tmp_path / name
+        shutil.copytree(folder / name, take)
+        assert cli("stabilize", take / "take.usda", "-o", take / "stabilized.usdc", "--attach", take / "take.usda") == 0
+        roots.append(take / "take.usda")
+    before = {p: p.read_bytes() for root in roots for p in root.parent.iterdir() if p.is_file()}
+    assert cli("evaluate", *roots, "--held-expression", "true", "--removal", models / "f.removal", "-o", tmp_path / "candidate") == 0
+    assert {p: p.read_bytes() for root in roots for p in root.parent.iterdir() if p.is_file()} == before
+    for root in roots:
+        assert cli("remove", root, "--model", models / "f.removal", "-o", root.parent / "quasistatic.usdc", "--attach", root) == 0
+    assert cli("evaluate", *roots, "--held-expression", "true", "-o", tmp_path / "attached") == 0
+    candidate, attached = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("candidate", "attached"))
+    assert candidate["held_expression"]["per_frame_ratio"] == pytest.approx(attached["held_expression"]["per_frame_ratio"], abs=1e-4)
+    assert candidate["held_expression"]["after_removal_mm"] == pytest.approx(attached["held_expression"]["after_removal_mm"], abs=1e-4)
+    for a, b in zip(candidate["takes"], attached["takes"]):
+        assert {k: v for k, v in a.items() if k != "take"} == pytest.approx({k: v for k, v in b.items() if k != "take"}, rel=1e-3, abs=1e-4)
+    capsys.readouterr()
+    assert cli("evaluate", *roots, "--removal", models / "h.synthesis", "-o", tmp_path / "wrong") == 2
+    assert "a synthesis model; this needs a removal model" in capsys.readouterr().err
+    assert not (tmp_path / "wrong").exists()

@@ -124,3 +124,22 @@ def test_random_tissue_covers_thin_stiff_and_anisotropic_actors():
         assert values.min() < low + 0.2 * (high - low) and values.max() > high - 0.2 * (high - low)
     default = TissueParams()
     assert default.depth_variation == 0 and default.expression_inertia == 0 and default.normal_ratio == 1
+
+
+def test_a_soft_hz_band_narrows_the_drawn_frequency_and_keeps_the_rest_of_the_actor():
+    """TissueParams.random and VolumetricParams.random draw soft_hz in a given band from the same
+    uniform draw, so the band changes nothing else; protocol() passes it to every take's draw."""
+    for cls, family in ((TissueParams, (5.0, 9.0)), (VolumetricParams, (4.5, 8.0))):
+        for seed in range(8):
+            wide, narrow = cls.random(seed), cls.random(seed, soft_hz=(7.5, 9.0))
+            u = (wide.soft_hz - family[0]) / (family[1] - family[0])
+            assert narrow.soft_hz == pytest.approx(7.5 + 1.5 * u)
+            assert replace(narrow, soft_hz=wide.soft_hz) == wide
+        with pytest.raises(ValueError, match="0 < low <= high"):
+            cls.random(0, soft_hz=(9.0, 7.5))
+    rig = small_face()
+    specs = protocol(rig, "demo", randomize_tissue="take", soft_hz=(6.0, 6.5))
+    assert specs and all(6.0 <= s.tissue.soft_hz <= 6.5 for s in specs)
+    assert len({s.tissue.soft_hz for s in specs}) > 1  # still one draw per take
+    with pytest.raises(ValueError, match="randomize_tissue"):
+        protocol(rig, "demo", soft_hz=(6.0, 6.5))
