@@ -60,6 +60,8 @@ _CURVATURE_DEPTH = 0.5  # the depth stays under this fraction of the skin's conv
 _DEPTH_SLOPE = 0.5  # cm of depth per cm along the skin, at most
 _SHRINK_ROUNDS = 12
 _MAX_ITERATIONS = 30  # chord iterations per step before the step refactorizes
+_SAG_ITERATIONS = 30  # chord iterations of a frame's gravity sag
+_NEWTON_ITERATIONS = 30  # Newton steps of a gravity sag where chord iterations did not converge
 _MIN_DEPTH = 0.25  # prisms thinner than this fraction of bone_thickness_cm are left out
 _SAG_SHIFT_HZ = 0.2  # mass shift of the static preconditioner, far below any tissue mode
 
@@ -377,11 +379,40 @@ class Layer:
         piola += (self.lam * (j - self.alpha) - self.stiffening * stretch)[:, None, None] * cof
         return np.matmul(shape, piola.transpose(0, 2, 1)) * volume[:, None, None]  # V sum_j P_ij shape_kj
 
+    def _newton_sag(self, sag, rest, shape, volume, load, x) -> np.ndarray | None:
+        """The static sag by projected Newton steps with a backtracking line search on the
+        residual, from `sag`; None when it does not converge. For frames where chord
+        iterations on the rest tangent cycle instead of converging (the layer stiffened far
+        from its rest tangent)."""
+        with np.errstate(over="ignore", invalid="ignore"):  # a trial step running away is a rejected trial
+            return self._newton_steps(sag, rest, shape, volume, load, x)
+
+    def _newton_steps(self, sag, rest, shape, volume, load, x) -> np.ndarray | None:
+        shift = sp.diags(np.repeat((2 * np.pi * _SAG_SHIFT_HZ) ** 2 * self.mass, 3))
+        residual = _residual(self, sag, rest, shape, volume, load, x)
+        for _ in range(_NEWTON_ITERATIONS):
+            x[:] = rest
+            x[self.free] += sag
+            step = _factorize_spd(self.tangent_stiffness(x, shape, volume) + shift).solve(residual.reshape(-1)).reshape(-1, 3)
+            size = 1.0
+            while size > 1e-3:
+                trial = _residual(self, sag - size * step, rest, shape, volume, load, x)
+                if np.linalg.norm(trial) < np.linalg.norm(residual):  # False for a non-finite trial
+                    break
+                size *= 0.5
+            else:
+                return None
+            sag, residual = sag - size * step, trial
+            if np.abs(step).max() <= self.params.tolerance_cm:  # the whole Newton step, not the line search's share
+                return sag
+        return None
+
     def gravity_sag(self, y: np.ndarray, turned: np.ndarray) -> np.ndarray:
         """(F, V, 3) static sag of the skin: forces(X + s) = M (g(t) - g(0)) on the free nodes.
 
         Frame by frame, chord iterations on the rest-tangent stiffness (refactorized as the
-        expression's rest shape drifts), started from the previous frames' sag extrapolated.
+        expression's rest shape drifts), started from the previous frames' sag extrapolated;
+        where they do not converge, projected Newton steps from the same start.
         """
         frames, columns = len(y), len(self.vertices)
         out = np.zeros((frames, columns, 3))
@@ -404,22 +435,32 @@ class Layer:
             guess = 2.0 * sag - previous
             previous, sag = sag, guess
             load = self.mass[:, None] * turned[f]
-            for _ in range(_MAX_ITERATIONS):
-                x[:] = rest
-                x[self.free] += sag
-                residual = self.forces(x, shape, volume)[self.free] - load
-                step = solver[0].solve(residual.reshape(-1)).reshape(-1, 3)
-                sag -= step
-                if np.abs(step).max() <= self.params.tolerance_cm:
-                    break
-            else:  # not converged: no sag, not a silently wrong truth
-                raise SimulationDiverged(f"the volumetric tissue's gravity sag did not converge at frame {f}: no static "
-                                         "equilibrium found for this pose and turn of the head")
+            start, converged = sag.copy(), False
+            with np.errstate(over="ignore", invalid="ignore"):  # iterations running away end in Newton steps below
+                for _ in range(_SAG_ITERATIONS):
+                    residual = _residual(self, sag, rest, shape, volume, load, x)
+                    step = solver[0].solve(residual.reshape(-1)).reshape(-1, 3)
+                    sag -= step
+                    converged = np.abs(step).max() <= self.params.tolerance_cm
+                    if converged or not np.isfinite(step).all():
+                        break
+            if not converged:  # the rest tangent is too far from where the layer stiffened: Newton steps instead
+                sag = self._newton_sag(start, rest, shape, volume, load, x)
+                if sag is None:  # not converged: no sag, not a silently wrong truth
+                    raise SimulationDiverged(f"the volumetric tissue's gravity sag did not converge at frame {f}: no static "
+                                             "equilibrium found for this pose and turn of the head")
             if not np.isfinite(sag).all():  # no sag, not a silent NaN truth
                 raise SimulationDiverged(f"the volumetric tissue's gravity sag diverged at frame {f}: no static equilibrium "
                                  "found for this pose and turn of the head")
             out[f, self.skin] = sag[self.dof[self.skin]]
         return out
+
+
+def _residual(layer, sag, rest, shape, volume, load, x) -> np.ndarray:
+    """The sag's static residual on the free nodes: elastic forces at rest + sag minus the load."""
+    x[:] = rest
+    x[layer.free] += sag
+    return layer.forces(x, shape, volume)[layer.free] - load
 
 
 def _outward_sign(points: np.ndarray, tri: np.ndarray) -> float:

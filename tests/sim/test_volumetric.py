@@ -108,13 +108,29 @@ def test_static_sag_matches_the_shear_layer_estimate(sheet):
     assert not np.any(result.gravity_sag[:, weights == 1])
 
 
+def test_newton_steps_find_the_sag_where_chord_iterations_stop_short(sheet, monkeypatch):
+    """Where the chord iterations on the rest tangent do not converge (cut to one here; on a
+    stiffened layer they can cycle), projected Newton steps from the same start find the same
+    static equilibrium."""
+    points, tris, weights = sheet
+    frames = 20
+    orient = quaternion.from_axis_angle(np.tile([0.0, 0.0, 1.0], (frames, 1)), np.radians(np.linspace(0.0, 40.0, frames)))
+    args = (held(points, frames), tris, np.zeros((frames, 3)), orient, FPS, flat(nonlinearity=4.0))
+    chord = simulate(*args, rigid_weights=weights).gravity_sag
+    monkeypatch.setattr(volumetric, "_SAG_ITERATIONS", 1)
+    newton = simulate(*args, rigid_weights=weights).gravity_sag
+    assert np.abs(chord).max() > 0.01  # cm: a sag worth finding
+    np.testing.assert_allclose(newton, chord, atol=1e-4)
+
+
 def test_a_gravity_sag_that_does_not_converge_is_an_error(sheet, monkeypatch):
-    """No static equilibrium within the chord iterations is a SimulationDiverged, never a
-    sag returned half-way (one iteration here, where the slab needs several)."""
+    """No static equilibrium within the chord iterations and the Newton steps is a
+    SimulationDiverged, never a sag returned half-way (one of each here, where the slab needs several)."""
     points, tris, weights = sheet
     frames = 20
     orient = quaternion.from_axis_angle(np.tile([0.0, 0.0, 1.0], (frames, 1)), np.radians(np.linspace(0.0, 6.0, frames)))
-    monkeypatch.setattr(volumetric, "_MAX_ITERATIONS", 1)
+    monkeypatch.setattr(volumetric, "_SAG_ITERATIONS", 1)
+    monkeypatch.setattr(volumetric, "_NEWTON_ITERATIONS", 1)
     with pytest.raises(tissue.SimulationDiverged, match="gravity sag did not converge at frame 1"):
         simulate(held(points, frames), tris, np.zeros((frames, 3)), orient, FPS, flat(), rigid_weights=weights)
 
