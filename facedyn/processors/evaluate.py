@@ -48,7 +48,6 @@ class EvaluateProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.dynamics.modelfile import load_model
         from facedyn.usd.errors import TakeError
         from facedyn.usd.take import read_take_below
 
@@ -60,14 +59,11 @@ class EvaluateProcessor(Processor):
         reads = QUASISTATIC_BELOW if params["removal"] is None else REMOVAL_READS
         for path in request.inputs:
             check_length(path, reads, request.frames)
-            if params["removal"] is None:
-                perf, _ = read_take_below(path, QUASISTATIC_BELOW, frames=request.frames)
-            else:
-                perf, _ = read_take_below(path, REMOVAL_READS, frames=request.frames)
-                removal = removal or removal_model(params["removal"], perf)
+            perf, _ = read_take_below(path, reads, frames=request.frames)
+            if params["removal"] is not None:
+                removal = removal or fitting_model(params["removal"], perf, "removal")
                 check_skull_frame(path, perf, params["removal"], removal)
-                perf = removed_by(perf, removal)
-            if perf.offsets is None:
+            elif perf.offsets is None:
                 raise TakeError(f"{path}: no removed offsets (primvars:facedyn:dynamicsOffset); run `usdfacedyn remove` first")
             if perf.frame_count < 8:
                 raise TakeError(f"{path}: {perf.frame_count} frames; the diagnostics need at least 8")
@@ -76,24 +72,22 @@ class EvaluateProcessor(Processor):
             takes.append((Path(path), perf))
         if params["held_expression"] and len(takes) < 2:
             raise UsageError("--held-expression compares takes: give at least two")
-        model = None
-        if params["synthesis"] is not None:
-            first = takes[0][1]
-            model = load_model(params["synthesis"], topology=first.topology, fps=first.fps)
-            if model.kind != "synthesis":
-                raise UsageError(f"--synthesis {params['synthesis']}: a {model.kind} model; this needs a synthesis model")
+        synthesis = None if params["synthesis"] is None else fitting_model(params["synthesis"], takes[0][1], "synthesis")
         description = {"takes": [str(p) for p, _ in takes], "frames": [p.frame_count for _, p in takes],
                        "held_expression": params["held_expression"], "synthesis": str(params["synthesis"] or ""),
                        "removal": str(params["removal"] or "the takes' own")}
-        return Plan(description, (request, takes, model))
+        return Plan(description, (request, takes, synthesis, removal))
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
-        request, takes, model = plan.state
+        request, read, synthesis, removal = plan.state
         params = request.params
-        progress.start("evaluate takes", len(takes))
-        per_take = []
-        for path, perf in takes:
-            per_take.append(take_diagnostics(path, perf, params["frequency"], model))
+        progress.start("evaluate takes", len(read))
+        takes, per_take = [], []
+        for path, perf in read:
+            if removal is not None:
+                perf = removed_by(perf, removal)
+            takes.append((path, perf))
+            per_take.append(take_diagnostics(path, perf, params["frequency"], synthesis))
             progress.advance()
         progress.finish()
         report = {"takes": [{k: v for k, v in t.items() if k != "plot"} for t in per_take]}
@@ -112,13 +106,13 @@ class EvaluateProcessor(Processor):
         return "\n".join(lines)
 
 
-def removal_model(path: Path, perf):
-    """The --removal model, checked to fit the takes (topology, frame rate) and to be a removal model."""
+def fitting_model(path: Path, perf, kind: str):
+    """The --removal or --synthesis model, checked to fit the takes (topology, frame rate) and to be of `kind`."""
     from facedyn.dynamics.modelfile import load_model
 
     model = load_model(path, topology=perf.topology, fps=perf.fps)
-    if model.kind != "removal":
-        raise UsageError(f"--removal {path}: a {model.kind} model; this needs a removal model")
+    if model.kind != kind:
+        raise UsageError(f"--{kind} {path}: a {model.kind} model; this needs a {kind} model")
     return model
 
 

@@ -379,24 +379,31 @@ class Layer:
         piola += (self.lam * (j - self.alpha) - self.stiffening * stretch)[:, None, None] * cof
         return np.matmul(shape, piola.transpose(0, 2, 1)) * volume[:, None, None]  # V sum_j P_ij shape_kj
 
+    def _sag_shift(self) -> sp.spmatrix:
+        """A slight mass shift for the sag's stiffness matrices: keeps them invertible where a
+        piece of the layer hangs on by a single node or edge."""
+        return sp.diags(np.repeat((2 * np.pi * _SAG_SHIFT_HZ) ** 2 * self.mass, 3))
+
+    def _sag_residual(self, sag, rest, shape, volume, load, x) -> np.ndarray:
+        """The sag's static residual on the free nodes: elastic forces at rest + sag minus the load."""
+        x[:] = rest
+        x[self.free] += sag
+        return self.forces(x, shape, volume)[self.free] - load
+
+    @np.errstate(over="ignore", invalid="ignore")  # a trial step running away is a rejected trial
     def _newton_sag(self, sag, rest, shape, volume, load, x) -> np.ndarray | None:
         """The static sag by projected Newton steps with a backtracking line search on the
         residual, from `sag`; None when it does not converge. For frames where chord
         iterations on the rest tangent cycle instead of converging (the layer stiffened far
         from its rest tangent)."""
-        with np.errstate(over="ignore", invalid="ignore"):  # a trial step running away is a rejected trial
-            return self._newton_steps(sag, rest, shape, volume, load, x)
-
-    def _newton_steps(self, sag, rest, shape, volume, load, x) -> np.ndarray | None:
-        shift = sp.diags(np.repeat((2 * np.pi * _SAG_SHIFT_HZ) ** 2 * self.mass, 3))
-        residual = _residual(self, sag, rest, shape, volume, load, x)
+        residual = self._sag_residual(sag, rest, shape, volume, load, x)
         for _ in range(_NEWTON_ITERATIONS):
             x[:] = rest
             x[self.free] += sag
-            step = _factorize_spd(self.tangent_stiffness(x, shape, volume) + shift).solve(residual.reshape(-1)).reshape(-1, 3)
+            step = _factorize_spd(self.tangent_stiffness(x, shape, volume) + self._sag_shift()).solve(residual.reshape(-1)).reshape(-1, 3)
             size = 1.0
             while size > 1e-3:
-                trial = _residual(self, sag - size * step, rest, shape, volume, load, x)
+                trial = self._sag_residual(sag - size * step, rest, shape, volume, load, x)
                 if np.linalg.norm(trial) < np.linalg.norm(residual):  # False for a non-finite trial
                     break
                 size *= 0.5
@@ -428,17 +435,15 @@ class Layer:
                 rest = self.rest_positions(skin[None].astype(np.float64))[0]
                 shape, volume = self.geometry(rest)
             if solver is None or _drift(solver[1], rest, self.elements) > self.params.refactor_strain:
-                # the rest tangent only preconditions the iterations; a slight mass shift keeps
-                # it invertible where a piece of the layer hangs on by a single node or edge
-                shift = sp.diags(np.repeat((2 * np.pi * _SAG_SHIFT_HZ) ** 2 * self.mass, 3))
-                solver = _factorize_spd(self.linear_stiffness(shape, volume) + shift), rest
+                # the rest tangent only preconditions the iterations
+                solver = _factorize_spd(self.linear_stiffness(shape, volume) + self._sag_shift()), rest
             guess = 2.0 * sag - previous
             previous, sag = sag, guess
             load = self.mass[:, None] * turned[f]
             start, converged = sag.copy(), False
             with np.errstate(over="ignore", invalid="ignore"):  # iterations running away end in Newton steps below
                 for _ in range(_SAG_ITERATIONS):
-                    residual = _residual(self, sag, rest, shape, volume, load, x)
+                    residual = self._sag_residual(sag, rest, shape, volume, load, x)
                     step = solver[0].solve(residual.reshape(-1)).reshape(-1, 3)
                     sag -= step
                     converged = np.abs(step).max() <= self.params.tolerance_cm
@@ -454,13 +459,6 @@ class Layer:
                                  "found for this pose and turn of the head")
             out[f, self.skin] = sag[self.dof[self.skin]]
         return out
-
-
-def _residual(layer, sag, rest, shape, volume, load, x) -> np.ndarray:
-    """The sag's static residual on the free nodes: elastic forces at rest + sag minus the load."""
-    x[:] = rest
-    x[layer.free] += sag
-    return layer.forces(x, shape, volume)[layer.free] - load
 
 
 def _outward_sign(points: np.ndarray, tri: np.ndarray) -> float:
