@@ -27,12 +27,16 @@ no truth, no rest) and go through `import`, `stabilize --actor actor.usda`, `rem
   - synthesis under new motion: the dialog under CMU 131_03 hopping; H synthesizes the
     dynamics from F's quasistatic output and the solved skull; against the true dynamics.
 Calibration (the paper trains H per actor, on the actor's captures through F): each test
-actor also gives a calibration session, nine held expressions of 1.5 s under motions no test
-take uses (platforms at 6, 7, 9, 10 and 11 Hz, a procedural walk, jump, dance and head
+actor also gives a calibration session, nine held expressions of 4.5 s (--session-seconds: a
+40 s session) under motions no test take uses (platforms at 6, 7, 9, 10 and 11 Hz, a procedural walk, jump, dance and head
 turns, their gaits jolting at foot contacts as training's do; no run, no hop, no 8 Hz), captured and stabilized as above, and
   usdfacedyn train-synthesis CALIBRATION_TAKES --calibrate H.synthesis --quasistatic F_truth_acc.removal
-goes on training the family's H on them (100 epochs; no truth: F's output is y(t)). Its
-synthesis is reported as H_calibrated beside the family's H.
+goes on training the family's H on them (100 epochs; no truth: F's output is y(t)), and
+  usdfacedyn train-synthesis CALIBRATION_TAKES --calibrate H.synthesis --response linear
+fits the actor's linear response to the skull on them (no F, no truth: each take holds one
+expression; facedyn.dynamics.response). Synthesis reports H_calibrated and linear_response
+beside the family's H; removal reports linear_response (`remove --model` with it) beside
+the F's.
 Tissue band (`--soft-hz-bands`, default 5-6.5 and 7.5-9 Hz): the recommended F is trained
 once more per band, each on its own corpus (`synth ... --soft-hz BAND`: the same protocol and
 seeds, the tissue's soft frequency drawn from the band; the same budget), and each test actor
@@ -45,7 +49,7 @@ and the chosen one (``F_truth_acc_chosen_on_session_solved``).
 Retargeting (A -> B, both volumetric test actors of a group, one topology): A's dialog
 under CMU hopping, captured and processed as above (A's take with its quasistatic layer),
 retargeted onto B's dialog under walking (B's quasistatic layer) with `usdfacedyn retarget`
-(B's synthesis model: the family's H, and B's calibrated H; and `--method delta-transfer`,
+(B's synthesis model: the family's H, B's calibrated H and B's linear response; and `--method delta-transfer`,
 A's removed offsets copied), scored against B's true dynamics under A's true skull motion
 (B's tissue simulating B's expression under A's motion). Target: synthesis <= 0.5x delta
 transfer. A test take whose volumetric simulation diverges is reported as such and its
@@ -61,7 +65,7 @@ Every figure is RMS over the face vertices as a fraction of the true dynamics' R
 upper bound, no capture has it; ``moving_average`` = the 21-frame moving average baseline
 on the solved take. One JSON object per case.
 
-    .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--held-out-actors 0] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--work DIR]
+    .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--held-out-actors 0] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--session-seconds 4.5] [--work DIR]
 
 A small-budget protocol (demo-scale corpus with the procedural talking takes, no Live Link
 performances, short takes, few epochs). Measured on 2 cores: `synth` 106 s (under a load of
@@ -78,7 +82,9 @@ from pathlib import Path
 
 import numpy as np
 
+from facedyn.dynamics.modelfile import load_model
 from facedyn.dynamics.removal import remove_dynamics
+from facedyn.dynamics.response import remove_with_response
 from facedyn.dynamics.synthesis import synthesize_dynamics
 from facedyn.dynamics.targets import dynamic_offsets
 from facedyn.evaluation import residual_fraction
@@ -104,6 +110,7 @@ F_VARIANTS = {  # name: (train-removal --target, --skull-features, its other fla
     "F_paper": ("moving-average", "velocity", ("--exclude", "dialog*")),
 }
 RECOMMENDED = "F_truth_acc"
+SESSION_SECONDS = 4.5  # per held expression of the calibration session
 CALIBRATION = (  # (take, motion, held expression) of each test actor's calibration session
     ("cal_smile_platform6hz", "platform:6", "smile"), ("cal_brow_platform7hz", "platform:7", "brow_raise"),
     ("cal_puff_platform9hz", "platform:9", "cheek_puff"), ("cal_jaw_platform10hz", "platform:10", "jaw_open"),
@@ -198,6 +205,20 @@ def choose_removal(roots: dict[str, Path], candidates: dict[str, Path], folder: 
     return (min(scored, key=scored.get) if scored else "family"), ratios
 
 
+def choose_on_session(roots: dict[str, Path], candidates: dict[str, Path], response: Path, folder: Path) -> tuple[str, dict]:
+    """The removal (a candidate F, or the actor's linear response) that leaves the least of the
+    session's motion beyond its held shapes and sag, no truth: `usdfacedyn evaluate --session
+    --removal F` on the session's takes, and the response's own leave-one-take-out figure
+    (recorded by train-synthesis); (its name, every candidate's fraction)."""
+    left = {}
+    for name, model in candidates.items():
+        out = folder / f"session_{name}"
+        usdfacedyn("evaluate", *map(str, roots.values()), "--session", "true", "--removal", str(model), "-o", str(out))
+        left[name] = json.loads((out / "report.json").read_text())["session"]["motion_left_beyond_sag"]
+    left["linear_response"] = load_model(response).info["calibration"]["session_cross_validated_left"]
+    return min(left, key=left.get), left
+
+
 def plain_capture(sim, rig, folder: Path, actor: Path):
     """A take's tracked points (tracker noise) as a plain cache, imported and stabilized with
     the actor through the console; (take root, tracked points)."""
@@ -211,7 +232,7 @@ def plain_capture(sim, rig, folder: Path, actor: Path):
 class TestTake:
     """A volumetric take's truth, its plain capture through the console, and the layers read back."""
 
-    def __init__(self, sim, rig, folder: Path, actor: Path, models: Path):
+    def __init__(self, sim, rig, folder: Path, actor: Path, models: Path, response: Path):
         from facedyn.usd.take import read_layers, read_take
 
         self.truth = sim
@@ -228,6 +249,9 @@ class TestTake:
             self.removed[name] = read_layers([layer, root])
         layer = folder / "quasistatic.usdc"
         usdfacedyn("remove", str(root), "-o", str(layer), "--attach", str(root), "--model", str(models / f"{RECOMMENDED}.removal"))
+        layer = folder / "quasistatic.linear_response.usdc"
+        usdfacedyn("remove", str(root), "-o", str(layer), "--model", str(response))
+        self.removed_by_response = read_layers([layer, root])
         self.synthesized = {"H": self.synthesize(models / "H.synthesis", "synthesized.usdc")}
 
     def synthesize(self, model: Path, name: str):
@@ -246,20 +270,23 @@ def calibration_specs(seconds: float, seed: int) -> dict[str, TakeSpec]:
             for k, (name, motion, expression) in enumerate(CALIBRATION)}
 
 
-def calibrated_h(roots: dict[str, Path], folder: Path, work: Path) -> Path:
-    """H calibrated on the actor's calibration captures (plain captures, stabilized with the
-    actor) through the console; F gives their quasistatic shapes: the model file."""
-    model = folder / "H_calibrated.synthesis"
-    usdfacedyn("train-synthesis", *map(str, roots.values()), "-o", str(model), "--calibrate", str(work / "H.synthesis"),
+def calibrated_h(roots: dict[str, Path], folder: Path, work: Path) -> dict[str, Path]:
+    """The actor's synthesis models from its calibration captures (plain captures, stabilized
+    with the actor), through the console: H's network calibrated through F, and the linear
+    response fitted on the held expressions (no F): {name: model file}."""
+    models = {"H_calibrated": folder / "H_calibrated.synthesis", "linear_response": folder / "linear_response.synthesis"}
+    usdfacedyn("train-synthesis", *map(str, roots.values()), "-o", str(models["H_calibrated"]), "--calibrate", str(work / "H.synthesis"),
                "--quasistatic", str(work / f"{RECOMMENDED}.removal"), "--device", "cpu")
-    return model
+    usdfacedyn("train-synthesis", *map(str, roots.values()), "-o", str(models["linear_response"]), "--calibrate", str(work / "H.synthesis"),
+               "--response", "linear")
+    return models
 
 
 def score(estimate, truth, fv) -> float:
     return round(residual_fraction(estimate, truth, truth, fv)["fraction"], 3)
 
 
-def removal_case(actor_name: str, label: str, take: TestTake, models: dict, fv, bands: dict, chosen: str) -> dict:
+def removal_case(actor_name: str, label: str, take: TestTake, models: dict, fv, bands: dict, chosen: str, response, session_choice: str) -> dict:
     truth = take.truth.offsets
     solved = take.stabilized.points
     result = {"case": "removal", "actor": actor_name, "test": label, "frames": len(truth),
@@ -273,6 +300,11 @@ def removal_case(actor_name: str, label: str, take: TestTake, models: dict, fv, 
         result[f"{RECOMMENDED}_{name}_solved"] = score(remove_dynamics(solved, *take.stabilized.skull(), take.stabilized.fps, model)[1], truth, fv)
     if bands:
         result[f"{RECOMMENDED}_chosen_on_session_solved"] = result[f"{RECOMMENDED}_{chosen}_solved"]
+    result["linear_response_solved"] = score(take.removed_by_response.offsets, truth, fv)
+    _, offsets = remove_with_response(take.tracked_true_skull, take.truth.skull_translate, take.truth.skull_orient, take.truth.fps, response)
+    result["linear_response_true_skull_upper_bound"] = score(offsets, truth, fv)
+    chosen_key = {"linear_response": "linear_response_solved", "family": f"{RECOMMENDED}_solved"}.get(session_choice, f"{RECOMMENDED}_{session_choice}_solved")
+    result["removal_chosen_on_session_motion_left_solved"] = result[chosen_key]
     return result
 
 
@@ -287,10 +319,12 @@ def synthesis_case(actor_name: str, take: TestTake, h_model, fv) -> dict:
             "synthesized_rms_mm": round(residual_fraction(take.synthesized["H"].offsets, 0 * truth, truth, fv)["residual_rms_cm"] * 10, 3),
             "H_calibrated_solved": score(take.synthesized["H_calibrated"].offsets, truth, fv),
             "calibrated_rms_mm": round(residual_fraction(take.synthesized["H_calibrated"].offsets, 0 * truth, truth, fv)["residual_rms_cm"] * 10, 3),
+            "linear_response_solved": score(take.synthesized["linear_response"].offsets, truth, fv),
+            "linear_response_rms_mm": round(residual_fraction(take.synthesized["linear_response"].offsets, 0 * truth, truth, fv)["residual_rms_cm"] * 10, 3),
             "H_true_skull_true_quasistatic_upper_bound": score(upper, truth, fv)}
 
 
-def retarget_case(source: tuple[str, TestTake], target: tuple[str, VolumetricParams, TestTake, Path], rig, models: Path, h_model, fv) -> dict:
+def retarget_case(source: tuple[str, TestTake], target: tuple[str, VolumetricParams, TestTake, dict], rig, models: Path, h_model, fv) -> dict:
     """A's capture retargeted onto B's quasistatic performance (the console's retarget, both
     methods), against B's tissue under A's true skull motion with B's own expression."""
     (a_name, a), (b_name, b_params, b, b_calibrated) = source, target
@@ -300,8 +334,8 @@ def retarget_case(source: tuple[str, TestTake], target: tuple[str, VolumetricPar
     truth = truth_sim.dynamics.astype(np.float32)
     folder = b.root.parent
     scores = {}
-    methods = (("synthesis", ("--model", str(models / "H.synthesis"))), ("synthesis_calibrated", ("--model", str(b_calibrated))),
-               ("delta_transfer", ("--method", "delta-transfer")))
+    methods = (("synthesis", ("--model", str(models / "H.synthesis"))), ("synthesis_calibrated", ("--model", str(b_calibrated["H_calibrated"]))),
+               ("linear_response", ("--model", str(b_calibrated["linear_response"]))), ("delta_transfer", ("--method", "delta-transfer")))
     for method, flags in methods:
         layer = folder / f"retargeted.{method}.usdc"
         usdfacedyn("retarget", str(b.root), "--source", str(a.root), "-o", str(layer), *flags)
@@ -315,6 +349,8 @@ def retarget_case(source: tuple[str, TestTake], target: tuple[str, VolumetricPar
             "ratio_to_delta_transfer": round(scores["synthesis"] / scores["delta_transfer"], 3),
             "H_calibrated_solved": scores["synthesis_calibrated"],
             "calibrated_ratio_to_delta_transfer": round(scores["synthesis_calibrated"] / scores["delta_transfer"], 3),
+            "linear_response_solved": scores["linear_response"],
+            "linear_response_ratio_to_delta_transfer": round(scores["linear_response"] / scores["delta_transfer"], 3),
             "delta_transfer_true_offsets_upper_bound": score(a.truth.offsets, truth, fv),
             "H_true_skull_true_quasistatic_upper_bound": score(upper, truth, fv)}
 
@@ -342,9 +378,9 @@ def simulate_tests(rig, specs: dict[str, TakeSpec], params: VolumetricParams, jo
 
 
 def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path, models: dict, bands: dict, h_model, args,
-              started: float) -> tuple[str, VolumetricParams, dict, Path]:
+              started: float) -> tuple[str, VolumetricParams, dict, dict]:
     """One volumetric actor's calibration and test takes through the console, and its cases;
-    (name, tissue, test takes, its calibrated H). `bands`: candidate recommended F's by name
+    (name, tissue, test takes, its synthesis models from the session). `bands`: candidate recommended F's by name
     ("family" and one per --soft-hz band), one chosen per actor on its calibration session."""
     fv = rig.face_vertices
     params = VolumetricParams.random(seed, substeps=2)  # one step per frame diverges on CMU hopping for some actors
@@ -354,7 +390,7 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
          damping_ratio=round(params.damping_ratio, 3), thickness_cm=round(params.thickness_cm, 2), nonlinearity=round(params.nonlinearity, 2))
     base = (6000 if held_out else 5000) + 10 * k
     specs = test_specs(args.seconds, base)
-    calibration = calibration_specs(args.seconds, base)
+    calibration = calibration_specs(args.session_seconds, base)
     t0 = time.perf_counter()
     sims = simulate_tests(rig, {**specs, **calibration}, params, args.jobs, actor_name, tag)
     simulated = time.perf_counter() - t0
@@ -367,12 +403,16 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
     chosen, ratios = choose_removal(roots, band_paths(work, args), tests / "calibration") if bands else (None, {})
     if bands:
         emit(case="tissue band chosen on the calibration session", actor=actor_name, **tag, chosen=chosen, held_expression_spread_ratio=ratios)
-    takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work) for label, sim in sims.items()}
+    session_choice, left = choose_on_session(roots, band_paths(work, args), calibrated["linear_response"], tests / "calibration")
+    emit(case="removal chosen on the session's motion left", actor=actor_name, **tag, chosen=session_choice, session_motion_left=left)
+    takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work, calibrated["linear_response"]) for label, sim in sims.items()}
+    response = load_model(calibrated["linear_response"])
     for label in ("dialog_walk", "dialog_run", "platform_8hz"):
         if label in takes:
-            emit(**removal_case(actor_name, label, takes[label], models, fv, bands, chosen), **tag)
+            emit(**removal_case(actor_name, label, takes[label], models, fv, bands, chosen, response, session_choice), **tag)
     if "dialog_hop" in takes:
-        takes["dialog_hop"].synthesized["H_calibrated"] = takes["dialog_hop"].synthesize(calibrated, "synthesized.calibrated.usdc")
+        for name, model in calibrated.items():
+            takes["dialog_hop"].synthesized[name] = takes["dialog_hop"].synthesize(model, f"synthesized.{name}.usdc")
         emit(**synthesis_case(actor_name, takes["dialog_hop"], h_model, fv), **tag)
     emit(case="test timing", actor=actor_name, **tag, simulate_seconds=round(simulated, 1), calibrate_seconds=round(calibrating, 1),
          total_seconds=round(time.perf_counter() - started, 1))
@@ -389,6 +429,8 @@ def main() -> None:
     parser.add_argument("--subsample", type=float, default=0.5, help="fraction of pairs per epoch, every F variant")
     parser.add_argument("--h-epochs", type=int, default=20)
     parser.add_argument("--seconds", type=float, default=1.5, help="length of each test take")
+    parser.add_argument("--session-seconds", type=float, default=SESSION_SECONDS, help="length of each calibration take (nine "
+                        "held expressions: a 40 s session by default)")
     parser.add_argument("--soft-hz-bands", type=lambda text: [b for b in text.split(",") if b], default=list(SOFT_HZ_BANDS),
                         help="comma-separated synth --soft-hz bands: the recommended F trained once more per band, one of "
                         "them or the family's chosen per actor on its calibration session ('' for none)")
@@ -398,7 +440,6 @@ def main() -> None:
     args = parser.parse_args()
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU mocap) is needed")
-    from facedyn.dynamics.modelfile import load_model
     from facedyn.usd.rig import write_blendshape_rig
 
     rig = default_face()

@@ -5,6 +5,10 @@ can be checked without one:
 - a held expression's quasistatic shape is the same whatever the head does, so across
   takes of one held expression under different motions the shape left after removal
   should spread less than the captured shape did (`held_expression_spread`);
+- a calibration session's takes each hold one expression, so everything on the face that
+  moves in a take beyond its held shape and the sag that follows the head's turn is
+  dynamics: the fraction of that motion a removal leaves (`motion_left_beyond_sag`) ranks
+  removal models per actor (facedyn.dynamics.response uses it for its cross-validation);
 - the skull's own rhythm (a platform's frequency, a gait's step rate) drives the
   dynamics, so after removal little of the capture's motion at that frequency should be
   left (`residual_at_frequency`; a platform take at a frequency training never saw is
@@ -69,6 +73,29 @@ def held_expression_spread(takes: list[np.ndarray], vertices: np.ndarray, skip: 
     per_frame = np.concatenate([np.sum((p - mean) ** 2, axis=-1).ravel() for p in held])
     across = np.array([np.sum((p.mean(axis=0) - mean) ** 2, axis=-1).mean() for p in held])
     return {"per_frame_cm": float(np.sqrt(per_frame.mean())), "across_takes_cm": float(np.sqrt(across.mean()))}
+
+
+def motion_left_beyond_sag(left: list[np.ndarray], motion: list[np.ndarray], rotations: list[np.ndarray]) -> float:
+    """The fraction of held takes' motion that a removal leaves, beyond the held shapes and the sag.
+
+    Per take k: motion[k] (rows, values) the captured skin (flattened coordinates, one row
+    per frame), left[k] the same frames after removal, rotations[k] (rows, 9) the skull's
+    rotation matrices. Each take is centred (its held shape); then a sag shared by the
+    takes, linear in the rotation entries (gravity's direction seen from the skull), is
+    fitted to each of the two and taken out, and the norms compare. Shared, because a
+    platform rocks the head by a tenth of a degree at its own frequency: a take's own sag
+    fit would take up its whole response.
+    """
+    if not (len(left) == len(motion) == len(rotations)) or not left:
+        raise ValueError("motion_left_beyond_sag needs one left, motion and rotation array per take, at least one take")
+    rotation = np.concatenate([r - r.mean(0) for r in rotations])
+
+    def beyond_sag(values: list[np.ndarray]) -> float:
+        centred = np.concatenate([v - v.mean(0) for v in values]).astype(np.float64)
+        coef, *_ = np.linalg.lstsq(rotation, centred, rcond=None)
+        return float(np.linalg.norm(centred - rotation @ coef))
+
+    return beyond_sag(left) / max(beyond_sag(motion), 1e-30)
 
 
 def band_amplitude(points: np.ndarray, fps: float, hz: float, vertices: np.ndarray) -> float:

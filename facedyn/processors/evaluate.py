@@ -8,7 +8,10 @@ fraction of the capture's motion left at the skull's frequency (a platform take'
 frequency: give one training never saw for a held-out check), and with `--synthesis`
 the re-synthesis residual against the capture. With `--held-expression`, the takes hold
 one expression under different motions: the spread of its shape after removal against
-the spread of the capture. With `--removal MODEL`, the takes are read as `remove` reads them
+the spread of the capture. With `--session`, the takes are an actor's calibration session,
+each holding one expression: the fraction of their motion beyond the held shapes and the
+sag that follows the head that the removal leaves (the number `train-synthesis --response
+linear` records for the actor's linear response, by leaving each take out). With `--removal MODEL`, the takes are read as `remove` reads them
 (stabilized) and that model's removal is evaluated, in memory: candidate models compare on
 one session without attaching (or writing) any layer.
 """
@@ -38,7 +41,9 @@ class EvaluateProcessor(Processor):
     writes = Writes("folder", metavar="DIR", help="the folder for report.json and diagnostics.png")
     parameters = (
         Parameter("held_expression", bool, False, "the takes hold one expression under different motions: report its spread"),
-        Parameter("skip", float, 0.5, "seconds at the start of each take left out of the spread (the expression easing in)",
+        Parameter("session", bool, False, "the takes are a calibration session, each holding one expression: report how much of "
+                  "their motion beyond the held shapes and the head-following sag the removal leaves"),
+        Parameter("skip", float, 0.5, "seconds at the start of each take left out of the spread and the session (the expression easing in)",
                   minimum=0.0, maximum=60.0, metavar="S"),
         Parameter("frequency", float, None, "the frequency (Hz) whose residual to report (default: the skull motion's peak)",
                   above=0.0, maximum=1000.0, metavar="HZ"),
@@ -74,7 +79,7 @@ class EvaluateProcessor(Processor):
             raise UsageError("--held-expression compares takes: give at least two")
         synthesis = None if params["synthesis"] is None else fitting_model(params["synthesis"], takes[0][1], "synthesis")
         description = {"takes": [str(p) for p, _ in takes], "frames": [p.frame_count for _, p in takes],
-                       "held_expression": params["held_expression"], "synthesis": str(params["synthesis"] or ""),
+                       "held_expression": params["held_expression"], "session": params["session"], "synthesis": str(params["synthesis"] or ""),
                        "removal": str(params["removal"] or "the takes' own")}
         return Plan(description, (request, takes, synthesis, removal))
 
@@ -93,6 +98,8 @@ class EvaluateProcessor(Processor):
         report = {"takes": [{k: v for k, v in t.items() if k != "plot"} for t in per_take]}
         if params["held_expression"]:
             report["held_expression"] = spread_diagnostics(takes, params["skip"])
+        if params["session"]:
+            report["session"] = session_diagnostics(takes, params["skip"])
         output = Path(request.output)
         output.mkdir(parents=True, exist_ok=True)
         (output / "report.json").write_text(json.dumps(report, indent=2, sort_keys=True) + "\n")
@@ -187,10 +194,37 @@ def spread_diagnostics(takes: list, skip_s: float) -> dict:
             "per_frame_ratio": round(after["per_frame_cm"] / before["per_frame_cm"], 4) if before["per_frame_cm"] > 0 else None}
 
 
+def session_diagnostics(takes: list, skip_s: float) -> dict:
+    """The fraction of the session's motion the removal leaves, beyond held shapes and sag.
+
+    The tracker's spikes (pops, dropped frames) are replaced in the capture, and the removal's
+    output is moved with it, as the linear response's own figure reads the session: a pop
+    is no dynamics any removal could take out."""
+    from facedyn.dynamics.diagnostics import motion_left_beyond_sag
+    from facedyn.dynamics.spikes import replace_spikes
+    from facedyn.geometry import quaternion
+
+    first = takes[0][1]
+    fv, skip = face_vertices(first), int(round(skip_s * first.fps))
+    if any(perf.frame_count <= skip + 2 for _, perf in takes):
+        raise UsageError(f"--skip {skip_s:g}: leaves too few frames of the shortest take")
+    left, motion, rotations = [], [], []
+    for _, perf in takes:
+        rows = perf.frame_count - skip
+        captured = (perf.points + perf.offsets)[:, fv].astype(np.float64)
+        cleaned, _ = replace_spikes(captured)
+        left.append((perf.points[:, fv] - (captured - cleaned))[skip:].reshape(rows, -1))
+        motion.append(cleaned[skip:].reshape(rows, -1))
+        rotations.append(quaternion.to_matrix(perf.skull()[1][skip:]).reshape(rows, 9))
+    return {"motion_left_beyond_sag": round(motion_left_beyond_sag(left, motion, rotations), 4)}
+
+
 def _headline(report: dict) -> dict:
     headline = {"mean_residual_at_frequency": round(float(np.mean([t["residual_at_frequency"] for t in report["takes"]])), 4)}
     if "held_expression" in report:
         headline["held_expression_spread_ratio"] = report["held_expression"]["per_frame_ratio"]
+    if "session" in report:
+        headline["session_motion_left"] = report["session"]["motion_left_beyond_sag"]
     return headline
 
 

@@ -1,5 +1,8 @@
 """The remove processor: subtract the secondary dynamics that network F predicts.
 
+Or that an actor's linear response predicts from the skull alone (`train-synthesis
+--response linear`, facedyn.dynamics.response): `--model` takes either.
+
 Reads the stabilized take (the layers below the quasistatic role) and writes the
 quasistatic layer: points = the quasistatic skin in skull space, and the removed dynamics
 as `primvars:facedyn:dynamicsOffset` (captured - quasistatic). F's features are skull
@@ -26,23 +29,30 @@ CHUNK_FRAMES = 1024  # frames computed, held and written (one value clip of a lo
 class RemoveProcessor(Processor):
     name = "remove"
     version = "1"
-    summary = "remove secondary dynamics with a trained removal model (network F)"
+    summary = "remove secondary dynamics with a trained removal model (network F) or an actor's linear response"
     reads = Reads("take", help="the take root (reads the stabilized take below any quasistatic layer)")
     writes = Writes("layer", role="quasistatic", help="the quasistatic layer to write (.usdc)")
     parameters = (
-        Parameter("model", Path, help="the removal model file (from train-removal)", metavar="MODEL"),
+        Parameter("model", Path, help="the removal model file (from train-removal), or an actor's linear response "
+                  "(train-synthesis --response linear)", metavar="MODEL"),
         Parameter("backend", str, "auto", "feature and Laplacian kernels", BACKENDS),
         Parameter("device", str, "auto", "torch device for the network: auto, cpu, cuda, cuda:N", check=check_device),
     )
 
     def prepare(self, request: Request) -> Plan:
-        reader, model = reader_with_model(request, self.writes.role, "removal")
+        from facedyn.dynamics.response import is_linear_response
+
+        reader, model = reader_with_model(request, self.writes.role, "removal", "synthesis")
+        if model.kind == "synthesis" and not is_linear_response(model):
+            raise UsageError(f"--model {request.params['model']}: a synthesis model (network H), which reads the quasistatic shape it would "
+                             "make; remove needs a removal model (F) or an actor's linear response (train-synthesis --response linear)")
         description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "model": str(request.params["model"]),
                        "samples": int(len(model.face.samples))}
         return Plan(description, (reader, model, request.params))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.dynamics.removal import remove_dynamics
+        from facedyn.dynamics.response import remove_with_response
         from facedyn.usd import schema
         from facedyn.usd.layers import LayerContent
 
@@ -56,8 +66,12 @@ class RemoveProcessor(Processor):
             progress.start("remove dynamics", reader.frame_count)
             for window in reader.windows(CHUNK_FRAMES, context_frames(model)):
                 translate, orient = window.take.skull()
-                quasistatic, offsets = remove_dynamics(window.take.points, translate, orient, reader.fps, model,
-                                                       backend=params["backend"], device=params["device"])
+                if model.kind == "removal":
+                    quasistatic, offsets = remove_dynamics(window.take.points, translate, orient, reader.fps, model,
+                                                           backend=params["backend"], device=params["device"])
+                else:
+                    quasistatic, offsets = remove_with_response(window.take.points, translate, orient, reader.fps, model,
+                                                                device=params["device"])
                 yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=quasistatic[window.inner],
                                    offsets=stats.add(offsets[window.inner]))
                 progress.advance(window.stop - window.start)
@@ -67,16 +81,16 @@ class RemoveProcessor(Processor):
                            summary=stats.summary, chunks=chunks())
 
 
-def reader_with_model(request: Request, role_name: str, kind: str):
-    """The take below `role_name` (a chunked reader, facedyn.usd.frames) and a model of `kind` that fits it."""
+def reader_with_model(request: Request, role_name: str, *kinds: str):
+    """The take below `role_name` (a chunked reader, facedyn.usd.frames) and a model of one of `kinds` that fits it."""
     from facedyn.dynamics.modelfile import load_model
     from facedyn.usd.frames import TakeFrames
 
     path = single_input(request)
     reader = TakeFrames(path, role_name, frames=request.frames)
     model = load_model(request.params["model"], topology=reader.head.topology, fps=reader.fps)
-    if model.kind != kind:
-        raise UsageError(f"--model {request.params['model']}: a {model.kind} model; this step needs a {kind} model")
+    if model.kind not in kinds:
+        raise UsageError(f"--model {request.params['model']}: a {model.kind} model; this step needs a {' or '.join(kinds)} model")
     check_skull_frame(path, reader.head, request.params["model"], model)
     return reader, model
 

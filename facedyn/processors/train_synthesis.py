@@ -10,13 +10,17 @@ accelerations by default, the paper's velocities with `--skull-features velocity
 `--calibrate MODEL` goes on training an existing H (one trained on a simulated corpus of
 many tissues) on one actor's own captures instead, through F as the paper does: the actor's
 tissue answers the skull in its own way, which a family's average does not
-(facedyn.dynamics.synthesis.calibrate_synthesis).
+(facedyn.dynamics.synthesis.calibrate_synthesis). `--calibrate MODEL --response linear`
+fits the actor's linear response to the skull in closed form instead, on takes that each
+hold one expression, with neither F nor truth (facedyn.dynamics.response says how); it
+keeps the model's setup and replaces its network.
 """
 from __future__ import annotations
 
 from functools import partial
 from pathlib import Path
 
+from facedyn.errors import UsageError
 from facedyn.processors.base import FileOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.processors.train_removal import training_summary
 from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths, training_face,
@@ -31,11 +35,15 @@ class TrainSynthesisProcessor(Processor):
     reads = Reads("takes", metavar="CORPUS", help="corpus folders (corpus.json), take folders or stabilized takes")
     writes = Writes("file", metavar="MODEL", help="the model file to write (e.g. actor.synthesis)")
     parameters = (
-        Parameter("quasistatic", str, help="a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes)",
-                  metavar="MODEL|truth"),
+        Parameter("quasistatic", str, None, "a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes); "
+                  "not with --response linear", metavar="MODEL|truth"),
         Parameter("calibrate", Path, None, "a synthesis model to go on training on these takes (an actor's own captures, "
                   "through --quasistatic F) instead of a new one; it keeps its samples, stretch setup and skull input",
                   metavar="MODEL"),
+        Parameter("response", str, "network", "what --calibrate fits: H's network trained on (through --quasistatic), or the "
+                  "actor's linear response to the skull in closed form, on takes that each hold one expression", ("network", "linear")),
+        Parameter("settle", float, 0.4, "--response linear: seconds left out at each take's start, where the expression settles",
+                  minimum=0.0, maximum=60.0, metavar="SECONDS"),
         Parameter("epochs", int, None, "training epochs (default: the paper's 30; 100 when calibrating)", minimum=1, maximum=100000),
         Parameter("skull_features", str, "acceleration",
                   "H's skull input: landmark accelerations over t-30..t+10 (beyond the paper), or the paper's velocities over t-10..t+10 "
@@ -49,12 +57,15 @@ class TrainSynthesisProcessor(Processor):
         from facedyn.usd.errors import TakeError
 
         params = request.params
+        check_sources(params)
         takes = load_takes(request.inputs, params, Progress.silent())
         first = takes[0][1]
         if first.uvs is None and params["calibrate"] is None:  # a calibrated model brings its stretch setup
             raise TakeError(f"{request.inputs[0]}: the takes have no uvs (primvars:st); stretch features need them")
         face, frame = training_face(request.inputs, params, takes)
-        if params["quasistatic"] == "truth":
+        if params["quasistatic"] is None:
+            quasistatic = None
+        elif params["quasistatic"] == "truth":
             truths = read_truths(request.inputs, [name for name, _ in takes])
             quasistatic = {name: truth.points for name, truth in truths.items()}
         else:
@@ -66,13 +77,15 @@ class TrainSynthesisProcessor(Processor):
                                 "train F and H on takes of one actor")
             face = quasistatic.face  # H uses F's samples and landmarks
         calibrated = None if params["calibrate"] is None else calibration_model(params["calibrate"], first, frame)
-        description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes),
-                       "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": epochs_of(params, calibrated),
+        linear = params["response"] == "linear"
+        description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes), "response": params["response"],
+                       "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": None if linear else epochs_of(params, calibrated),
                        "actor": frame.get("actor"), "calibrate": None if calibrated is None else str(params["calibrate"])}
         return Plan(description, (request, takes, quasistatic, face, frame, calibrated))
 
     def run(self, plan: Plan, progress: Progress) -> FileOutput:
         from facedyn.dynamics.modelfile import save_model
+        from facedyn.dynamics.response import fit_linear_response
         from facedyn.dynamics.skull_motion import NAMED
         from facedyn.dynamics.synthesis import calibrate_synthesis, synthesis_config, train_synthesis
         from facedyn.dynamics.training import TrainingSequence
@@ -82,7 +95,12 @@ class TrainSynthesisProcessor(Processor):
         config = synthesis_config(epochs=epochs_of(params, calibrated), validation=validation_names(params), seed=params["seed"],
                                   device=params["device"], skull_motion=NAMED[params["skull_features"]])
         sequences = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
-        if calibrated is None:
+        if params["response"] == "linear":
+            progress.start(f"fit the linear response ({len(takes)} takes)", 1)
+            model = fit_linear_response(calibrated, sequences, settle_s=params["settle"])
+            progress.advance()
+            last = None
+        elif calibrated is None:
             on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
             model = train_synthesis(sequences, face, takes[0][1].uvs, quasistatic, config, on_epoch, backend=params["backend"])
         else:
@@ -92,8 +110,23 @@ class TrainSynthesisProcessor(Processor):
         model.info.update(frame)
         record = model.info["calibration"] if calibrated is not None else model.info["training"]
         record.update(skull=params["skull"], inputs=[str(p) for p in request.inputs], quasistatic=params["quasistatic"])
-        summary = {**training_summary(model, takes, face if calibrated is None else calibrated.face, last), "quasistatic": params["quasistatic"]}
+        summary = {**training_summary(model, takes, face if calibrated is None else calibrated.face, last), "quasistatic": params["quasistatic"],
+                   "response": params["response"]}
+        if params["response"] == "linear":
+            summary["session_cross_validated_left"] = record["session_cross_validated_left"]
         return FileOutput(partial(save_model, model), summary)
+
+
+def check_sources(params: dict) -> None:
+    """--quasistatic for a network, none for a linear response, which needs --calibrate's setup."""
+    if params["response"] == "linear":
+        if params["calibrate"] is None:
+            raise UsageError("--response linear needs --calibrate MODEL: the synthesis model whose samples, stretch setup and "
+                             "skull input the linear response takes")
+        if params["quasistatic"] is not None:
+            raise UsageError("--response linear fits held expressions without a quasistatic source; leave out --quasistatic")
+    elif params["quasistatic"] is None:
+        raise UsageError("--quasistatic MODEL|truth is required: what gives the takes' quasistatic shapes")
 
 
 def epochs_of(params: dict, calibrated) -> int:

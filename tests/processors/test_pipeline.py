@@ -186,6 +186,48 @@ def test_train_synthesis_calibrates_an_existing_h_on_an_actors_takes(corpus, cap
     assert not (tmp_path / "bad.synthesis").exists()
 
 
+def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_removes(corpus, capsys, tmp_path):
+    """--response linear: held-expression takes, no quasistatic source; the model keeps H's
+    setup, `synthesize` and `remove` take it, and what it removes is the synthesized dynamics
+    of the same skull; misuse is a usage error that writes nothing."""
+    import json
+    import shutil
+
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.usd.take import read_layers
+
+    folder, models = corpus
+    session = [folder / name for name in ("smile_walk", "smile_hop", "jaw_open_platform7", "jaw_open_platform10")]
+    response = tmp_path / "actor.synthesis"
+    assert cli("train-synthesis", *session, "-o", response, "--calibrate", models / "h.synthesis", "--response", "linear",
+               "--skull", "truth", "--settle", "0.3") == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["summary"]["response"] == "linear" and 0 < report["summary"]["session_cross_validated_left"] < 2
+    family, fitted = load_model(models / "h.synthesis"), load_model(response)
+    assert np.array_equal(fitted.face.samples, family.face.samples) and fitted.skull_input == family.skull_input
+    assert fitted.info["calibration"]["settle_s"] == 0.3 and fitted.info["training"] == family.info["training"]
+    take = tmp_path / "take"
+    shutil.copytree(folder / "pucker_walk", take)
+    root = take / "take.usda"
+    assert cli("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root) == 0
+    assert cli("remove", root, "-o", take / "quasistatic.usdc", "--attach", root, "--model", response) == 0
+    assert cli("synthesize", root, "-o", take / "synthesized.usdc", "--model", response) == 0
+    capsys.readouterr()
+    removed = read_layers([take / "quasistatic.usdc", root])
+    synthesized = read_layers([take / "synthesized.usdc", root])
+    assert np.abs(removed.offsets).max() > 1e-3
+    np.testing.assert_allclose(removed.offsets, synthesized.offsets, atol=1e-5)  # the same skull, the same dynamics
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    for flags in (("--response", "linear"), ("--calibrate", models / "h.synthesis", "--response", "linear", "--quasistatic", models / "f.removal")):
+        assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", *flags) == 2
+    assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth") == 2  # no --quasistatic
+    assert cli("remove", root, "-o", take / "bad.usdc", "--model", models / "h.synthesis") != 0
+    errors = capsys.readouterr().err
+    assert "--response linear needs --calibrate" in errors and "leave out --quasistatic" in errors and "--quasistatic MODEL|truth is required" in errors
+    assert "a synthesis model (network H), which reads the quasistatic shape" in errors and "Traceback" not in errors
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before
+
+
 def _stack(root):
     layer = Sdf.Layer.OpenAsAnonymous(str(root))
     return list(layer.subLayerPaths)
@@ -297,7 +339,7 @@ def test_retarget_streams_in_chunks_that_equal_the_whole_take(corpus, tmp_path, 
 
 def test_evaluate_compares_a_removal_model_on_stabilized_takes_without_touching_them(corpus, tmp_path, capsys):
     """`evaluate --removal F` reports what `remove` with F and then `evaluate` would (held
-    expression spread, per-take numbers) while leaving every take file as it was; a
+    expression spread, the session's motion left, per-take numbers) while leaving every take file as it was; a
     synthesis model is refused as --removal."""
     import json
     import shutil
@@ -310,14 +352,16 @@ def test_evaluate_compares_a_removal_model_on_stabilized_takes_without_touching_
         assert cli("stabilize", take / "take.usda", "-o", take / "stabilized.usdc", "--attach", take / "take.usda") == 0
         roots.append(take / "take.usda")
     before = {p: p.read_bytes() for root in roots for p in root.parent.iterdir() if p.is_file()}
-    assert cli("evaluate", *roots, "--held-expression", "true", "--removal", models / "f.removal", "-o", tmp_path / "candidate") == 0
+    assert cli("evaluate", *roots, "--held-expression", "true", "--session", "true", "--removal", models / "f.removal", "-o", tmp_path / "candidate") == 0
     assert {p: p.read_bytes() for root in roots for p in root.parent.iterdir() if p.is_file()} == before
     for root in roots:
         assert cli("remove", root, "--model", models / "f.removal", "-o", root.parent / "quasistatic.usdc", "--attach", root) == 0
-    assert cli("evaluate", *roots, "--held-expression", "true", "-o", tmp_path / "attached") == 0
+    assert cli("evaluate", *roots, "--held-expression", "true", "--session", "true", "-o", tmp_path / "attached") == 0
     candidate, attached = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("candidate", "attached"))
     assert candidate["held_expression"]["per_frame_ratio"] == pytest.approx(attached["held_expression"]["per_frame_ratio"], abs=1e-4)
     assert candidate["held_expression"]["after_removal_mm"] == pytest.approx(attached["held_expression"]["after_removal_mm"], abs=1e-4)
+    left = candidate["session"]["motion_left_beyond_sag"]  # F leaves part of each held take's motion, not all of it
+    assert 0 < left < 1 and attached["session"]["motion_left_beyond_sag"] == pytest.approx(left, abs=1e-4)
     for a, b in zip(candidate["takes"], attached["takes"]):
         assert {k: v for k, v in a.items() if k != "take"} == pytest.approx({k: v for k, v in b.items() if k != "take"}, rel=1e-3, abs=1e-4)
     capsys.readouterr()

@@ -1,0 +1,177 @@
+"""An actor's linear response to skull motion, fitted on its calibration session without truth.
+
+H trained on a family of simulated tissues predicts the family's average answer to the skull,
+and going on training its network on an actor's session (`calibrate_synthesis`) moves
+hundreds of thousands of weights on a few thousand frames, through targets that F makes.
+A linear response has one weight per skull feature and sample coordinate and is fitted in
+closed form (ridge regression) on the session's own captures, without F and without truth:
+each calibration take holds one expression, so its skin in skull space is
+
+    x(t) = m + G r(t) + W b(t) + noise,
+
+m the held shape, r(t) the nine entries of the skull's rotation (gravity's direction seen
+from the skull is a fixed combination of them, and the static sag follows it: the
+quasistatic shape of a head that turns), b(t) the model's skull features (landmark
+accelerations over t-30..t+10), W the response. m belongs to each take and is projected
+out of it (the same fit as an unpenalized intercept per take); G and W are shared and
+fitted together, G unpenalized. G is shared because a platform rocks the head by a tenth
+of a degree at its own frequency: a sag fitted to that take alone would take up the
+take's whole response, while across the session the sag is set by the gaits' slow turns.
+The first `settle_s` of every take are left out: the expression settles there and its own
+inertia rings.
+
+The result is a synthesis model like H (the template's samples, landmarks, stretch setup and
+skull input), whose network is one linear layer that reads no stretch: what the response
+cannot say is how an expression changes the tissue's answer. With zero skull acceleration
+it predicts zero dynamics. Since it reads the skull alone, it also removes: the capture
+minus the dynamics it predicts from the solved skull (`remove_with_response`, `usdfacedyn
+remove --model` of a linear response). `benchmarks/bench_cross_sim.py` has what it gives on tissue of
+another simulator family; the README quotes it.
+"""
+from __future__ import annotations
+
+import copy
+from typing import Iterable
+
+import numpy as np
+import torch
+
+from facedyn.dynamics.diagnostics import motion_left_beyond_sag
+from facedyn.dynamics.features import check_fps
+from facedyn.dynamics.modelfile import DynamicsModel
+from facedyn.dynamics.network import Network, NetworkSpec, resolve_device
+from facedyn.dynamics.skull import check_points, check_transforms, skull_space
+from facedyn.dynamics.spikes import replace_spikes
+from facedyn.dynamics.training import TrainingSequence
+from facedyn.geometry import quaternion
+
+SETTLE_S = 0.4  # the simulated sessions ease their expression in over 0.3 s
+RIDGE = 0.1  # penalty per frame on the standardized skull features
+
+
+def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: float = SETTLE_S, ridge: float = RIDGE) -> DynamicsModel:
+    """A synthesis model with ``model``'s setup whose network is the takes' linear response.
+
+    takes: TrainingSequences (or dicts) of one actor, each holding one expression under
+    skull motion (platforms, walks, jumps...), all at the model's frame rate.
+    """
+    if model.kind != "synthesis":
+        raise ValueError(f"fit_linear_response needs a synthesis model as its template, got a {model.kind!r} model")
+    if not ridge > 0:
+        raise ValueError(f"ridge must be positive, got {ridge}")
+    skull_input = model.skull_input
+    features, rotations, targets, described = [], [], [], []
+    for take in map(TrainingSequence.coerce, takes):
+        b, r, x = _take_rows(take, model, settle_s)
+        features.append(b)
+        rotations.append(r)
+        targets.append(x)
+        described.append({"name": take.name, "frames": int(len(take.points)), "rows": int(len(b))})
+    if not described:
+        raise ValueError("a linear response needs at least one take")
+    weights, scale = _solve(features, rotations, targets, ridge)
+    left = cross_validated_left(features, rotations, targets, ridge) if len(described) > 1 else None
+    network = _linear_network(model.network.spec, weights, scale)
+    record = {"response": "linear", "takes": described, "rows": int(sum(len(b) for b in features)), "settle_s": float(settle_s),
+              "ridge": float(ridge), "skull_motion": skull_input.to_json(),
+              "session_cross_validated_left": None if left is None else round(left, 4)}
+    info = {**copy.deepcopy(model.info), "calibration": record, "validation": None}
+    return DynamicsModel(kind="synthesis", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
+                         arrays=dict(model.arrays), skull_motion=skull_input)
+
+
+def cross_validated_left(features: list, rotations: list, targets: list, ridge: float) -> float:
+    """How much of the session's motion a response fitted without each take leaves in it.
+
+    Each take's motion beyond its held shape and the session's rotation-following sag,
+    less what the response fitted on the other takes predicts: the fraction left
+    (facedyn.dynamics.diagnostics.motion_left_beyond_sag; 0: the actor's tissue answers
+    every motion of the session as one linear system; near 1: it does not, e.g. tissue
+    that stiffens with strain or with the expression). The same fraction of a removal
+    model's output (`usdfacedyn evaluate --session`) compares the two on one actor.
+    """
+    left = []
+    for k in range(len(features)):
+        others = [i for i in range(len(features)) if i != k]
+        weights, scale = _solve([features[i] for i in others], [rotations[i] for i in others], [targets[i] for i in others], ridge)
+        left.append(targets[k] - (features[k] / scale) @ weights)
+    return motion_left_beyond_sag(left, targets, rotations)
+
+
+def _solve(features: list, rotations: list, targets: list, ridge: float) -> tuple[np.ndarray, np.ndarray]:
+    """(response weights on the scaled skull features (features, 3S), the features' scale):
+    ridge on the features, the shared sag on the rotation entries unpenalized."""
+    b = np.concatenate(features)
+    scale = np.sqrt(np.mean(b * b, axis=0))
+    scale = np.where(scale > 1e-12, scale, 1.0)
+    design = np.concatenate([b / scale, np.concatenate(rotations)], axis=1)
+    penalty = np.concatenate([np.full(b.shape[1], ridge * len(b)), np.full(9, 1e-9 * len(b))])
+    solution = np.linalg.solve(design.T @ design + np.diag(penalty), design.T @ np.concatenate(targets))
+    return solution[: b.shape[1]], scale
+
+
+def is_linear_response(model: DynamicsModel) -> bool:
+    """Whether a model is an actor's linear response (reads the skull alone)."""
+    return model.kind == "synthesis" and model.info.get("calibration", {}).get("response") == "linear"
+
+
+def remove_with_response(points, translate, orient, fps: float, model: DynamicsModel, *, space: str = "skull",
+                         device: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+    """(quasistatic skull-space points, offsets), float32: the capture minus the dynamics the
+    linear response predicts from the skull; arguments as facedyn.dynamics.removal.remove_dynamics."""
+    if not is_linear_response(model):
+        raise ValueError("remove_with_response needs a linear response (fit_linear_response); a synthesis network reads the "
+                         "quasistatic shape it would make")
+    pts = check_points(points)
+    if pts.shape[1] != model.face.point_count:
+        raise ValueError(f"the take has {pts.shape[1]} points per frame, the model's mesh {model.face.point_count}")
+    model.check_compatible(fps=check_fps(fps))
+    t, q = check_transforms(translate, orient, len(pts))
+    b = model.skull_input.features(t, q, model.face.landmarks, fps)
+    inputs = np.zeros((len(pts), model.network.spec.inputs), np.float32)  # the stretch it does not read stays zero
+    inputs[:, : b.shape[1]] = b
+    network = model.network.to(resolve_device(device)).eval()
+    with torch.inference_mode():
+        d = network(torch.from_numpy(inputs).to(next(network.parameters()).device)).cpu().numpy()
+    offsets = np.empty((len(pts), pts.shape[1], 3), np.float32)
+    model.propagator().apply_into(d.reshape(len(pts), -1, 3), offsets)
+    skull_points = skull_space(pts, t, q, space).astype(np.float32)
+    return skull_points - offsets, offsets
+
+
+def _take_rows(take: TrainingSequence, model: DynamicsModel, settle_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(skull features, rotation entries, sample coordinates) of a take's settled frames,
+    each less its mean over them (the held shape's intercept)."""
+    pts = check_points(take.points, f"take {take.name!r} points")
+    if pts.shape[1] != model.face.point_count:
+        raise ValueError(f"take {take.name!r} has {pts.shape[1]} points, the model's mesh {model.face.point_count}")
+    fps = check_fps(take.fps)
+    model.check_compatible(fps=fps)
+    t, q = check_transforms(take.translate, take.orient, len(pts))
+    first = int(round(settle_s * fps))
+    last = len(pts) - model.skull_input.future - 1  # later windows read zeros past the take's end
+    if last - first < 20:
+        raise ValueError(f"take {take.name!r} has {len(pts)} frames; a linear response needs at least 20 after its first "
+                         f"{settle_s:g} s (the expression settling) and before its last {model.skull_input.future + 1}")
+    x, _ = replace_spikes(skull_space(pts[:, model.face.samples], t, q, take.space))
+    keep = slice(first, last)
+    b = model.skull_input.features(t, q, model.face.landmarks, fps)[keep].astype(np.float64)
+    x = x[keep].reshape(last - first, -1)
+    r = quaternion.to_matrix(q[keep]).reshape(-1, 9)
+    return b - b.mean(0), r - r.mean(0), x - x.mean(0)
+
+
+def _linear_network(template: NetworkSpec, weights: np.ndarray, scale: np.ndarray) -> Network:
+    """One linear layer over the template's inputs (skull features, then stretch, which it
+    does not read) with inputs scaled but not centred: zero skull motion, zero dynamics."""
+    skull_count, outputs = weights.shape
+    network = Network(NetworkSpec(template.inputs, (), outputs))
+    std = np.ones(template.inputs)
+    std[:skull_count] = scale
+    network.set_normalization(np.zeros(template.inputs), std, np.zeros(outputs), 1.0)
+    layer = network.layers[0]
+    with torch.no_grad():
+        layer.weight.zero_()
+        layer.weight[:, :skull_count] = torch.from_numpy(weights.T.astype(np.float32))
+        layer.bias.zero_()
+    return network

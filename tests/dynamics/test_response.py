@@ -1,0 +1,119 @@
+"""An actor's linear response fitted on held expressions without truth (facedyn.dynamics.response)."""
+import numpy as np
+import pytest
+
+from facedyn.dynamics.face import FaceSetup
+from facedyn.dynamics.modelfile import DynamicsModel, load_model, save_model
+from facedyn.dynamics.network import Network, removal_spec
+from facedyn.dynamics.response import fit_linear_response
+from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
+from facedyn.dynamics.training import TrainingSequence
+from facedyn.sim.corpus import TakeSpec, simulate_take
+from facedyn.sim.default_face import default_face
+from facedyn.sim.tissue import TissueParams
+
+FPS = 120.0
+TISSUE = TissueParams(soft_hz=6.5, damping_ratio=0.15)  # not the default tissue: the response is this actor's
+SESSION = [("platform:6", "smile"), ("platform:9", "jaw_open"), ("platform:11", "brow_raise"), ("walk", "pucker"), ("jump", "frown"),
+           ("turn", "smile"), ("dance", "jaw_open")]
+INNER = slice(10, -10)
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return default_face(8)
+
+
+@pytest.fixture(scope="module")
+def session(rig):
+    """The actor's calibration session: one held expression per take, under platforms and gaits."""
+    return [simulate_take(rig, TakeSpec(f"cal_{k}", motion, expression, duration_s=3.0, seed=300 + k, tissue=TISSUE))
+            for k, (motion, expression) in enumerate(SESSION)]
+
+
+@pytest.fixture(scope="module")
+def template(rig, session):
+    """A synthesis model to take the setup from (samples, landmarks, stretch, skull input); one epoch."""
+    face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, sample_count=48)
+    takes = [as_take(s) for s in session[:2]]
+    truth = {s.spec.name: s.quasistatic for s in session[:2]}
+    return train_synthesis(takes, face, rig.uvs, truth, synthesis_config(epochs=1, validation=()), backend="numpy")
+
+
+def as_take(sim):
+    return TrainingSequence(sim.spec.name, sim.captured, FPS, sim.skull_translate, sim.skull_orient)
+
+
+def rms(values) -> float:
+    return float(np.sqrt(np.mean(np.square(values, dtype=np.float64))))
+
+
+def test_held_expressions_give_the_response_that_the_true_dynamics_give(rig, session, template):
+    """Without truth (each take's held shape and its sag that turns with the head projected
+    out), the fit predicts a new motion with a changing expression as well as the same fit on
+    the true dynamics, and far better than nothing."""
+    response = fit_linear_response(template, [as_take(s) for s in session])
+    on_truth = fit_linear_response(template, [TrainingSequence(s.spec.name, s.quasistatic[0] + s.offsets, FPS, s.skull_translate, s.skull_orient)
+                                              for s in session])
+    new = simulate_take(rig, TakeSpec("speech_run", "run", duration_s=2.0, seed=777, speech=True, tissue=TISSUE))
+
+    def error(model):
+        _, offsets = synthesize_dynamics(new.quasistatic, new.skull_translate, new.skull_orient, FPS, model, "numpy")
+        return rms(offsets[INNER] - new.offsets[INNER]) / rms(new.offsets[INNER])
+
+    truth_free, upper = error(response), error(on_truth)
+    print(f"\nrunning with speech: {truth_free:.3f} of its dynamics left (the fit on true dynamics: {upper:.3f})")
+    assert truth_free < 0.5
+    assert truth_free < upper + 0.05
+    left = response.info["calibration"]["session_cross_validated_left"]
+    print(f"the session's motion left by the response fitted without each take: {left:.3f}")
+    assert 0 < left < 0.7  # measured 0.48: 3 s takes, each motion seen once
+
+
+def test_motion_left_beyond_sag_is_what_a_removal_leaves_of_held_takes(session):
+    """On held takes the true quasistatic skin is the held shape plus a sag that follows the
+    head, so the true removal leaves nothing, no removal leaves everything, half of it half."""
+    from facedyn.dynamics.diagnostics import motion_left_beyond_sag
+    from facedyn.geometry import quaternion
+
+    settled = slice(48, None)
+    motion = [s.captured[settled].reshape(len(s.captured[settled]), -1) for s in session]
+    rotations = [quaternion.to_matrix(s.skull_orient[settled]).reshape(-1, 9) for s in session]
+
+    def left(removed):
+        return motion_left_beyond_sag([m - r for m, r in zip(motion, removed)], motion, rotations)
+
+    offsets = [s.offsets[settled].reshape(len(m), -1) for s, m in zip(session, motion)]
+    assert left(offsets) < 0.02
+    assert left([0 * o for o in offsets]) == pytest.approx(1.0)
+    assert left([0.5 * o for o in offsets]) == pytest.approx(0.5, abs=0.02)
+
+
+def test_the_response_is_zero_at_rest_and_survives_the_model_file(rig, session, template, tmp_path):
+    response = fit_linear_response(template, [as_take(s) for s in session])
+    path = tmp_path / "actor.synthesis"
+    save_model(response, path)
+    loaded = load_model(path)
+    sim = session[3]
+    _, saved = synthesize_dynamics(sim.quasistatic, sim.skull_translate, sim.skull_orient, FPS, response, "numpy")
+    _, reread = synthesize_dynamics(sim.quasistatic, sim.skull_translate, sim.skull_orient, FPS, loaded, "numpy")
+    np.testing.assert_allclose(reread, saved, atol=1e-6)
+    tilted = np.repeat(sim.skull_orient[40:41], len(sim.skull_orient), 0)  # a head held still, turned
+    _, still = synthesize_dynamics(sim.quasistatic, np.repeat(sim.skull_translate[40:41], len(tilted), 0), tilted, FPS, loaded, "numpy")
+    assert np.abs(still).max() < 1e-6
+    assert np.array_equal(loaded.face.samples, template.face.samples) and loaded.skull_input == template.skull_input
+    assert loaded.network.spec.hidden == () and loaded.info["calibration"]["response"] == "linear"
+    assert loaded.info["calibration"]["session_cross_validated_left"] == response.info["calibration"]["session_cross_validated_left"]
+    assert [t["name"] for t in loaded.info["calibration"]["takes"]] == [s.spec.name for s in session]
+
+
+def test_refusals_name_the_problem(session, template):
+    with pytest.raises(ValueError, match="needs a synthesis model"):
+        removal = DynamicsModel(kind="removal", network=Network(removal_spec(315, 63)), face=template.face, fps=FPS,
+                                windows={"skull": 10, "skin": 10, "target": 10})
+        fit_linear_response(removal, [as_take(session[0])])
+    short = session[0]
+    with pytest.raises(ValueError, match="take 'short' has 60 frames"):
+        fit_linear_response(template, [TrainingSequence("short", short.captured[:60], FPS, short.skull_translate[:60], short.skull_orient[:60])])
+    with pytest.raises(ValueError, match="at least one take"):
+        fit_linear_response(template, [])
