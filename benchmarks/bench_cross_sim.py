@@ -205,7 +205,7 @@ def choose_removal(roots: dict[str, Path], candidates: dict[str, Path], folder: 
     return (min(scored, key=scored.get) if scored else "family"), ratios
 
 
-def choose_on_session(roots: dict[str, Path], candidates: dict[str, Path], response: Path, folder: Path) -> tuple[str, dict]:
+def choose_on_session(roots: dict[str, Path], candidates: dict[str, Path], response, folder: Path) -> tuple[str, dict]:
     """The removal (a candidate F, or the actor's linear response) that leaves the least of the
     session's motion beyond its held shapes and sag, no truth: `usdfacedyn evaluate --session
     --removal F` on the session's takes, and the response's own leave-one-take-out figure
@@ -215,7 +215,7 @@ def choose_on_session(roots: dict[str, Path], candidates: dict[str, Path], respo
         out = folder / f"session_{name}"
         usdfacedyn("evaluate", *map(str, roots.values()), "--session", "true", "--removal", str(model), "-o", str(out))
         left[name] = json.loads((out / "report.json").read_text())["session"]["motion_left_beyond_sag"]
-    left["linear_response"] = load_model(response).info["calibration"]["session_cross_validated_left"]
+    left["linear_response"] = response.info["calibration"]["session_cross_validated_left"]
     return min(left, key=left.get), left
 
 
@@ -270,7 +270,7 @@ def calibration_specs(seconds: float, seed: int) -> dict[str, TakeSpec]:
             for k, (name, motion, expression) in enumerate(CALIBRATION)}
 
 
-def calibrated_h(roots: dict[str, Path], folder: Path, work: Path) -> dict[str, Path]:
+def session_models(roots: dict[str, Path], folder: Path, work: Path) -> dict[str, Path]:
     """The actor's synthesis models from its calibration captures (plain captures, stabilized
     with the actor), through the console: H's network calibrated through F, and the linear
     response fitted on the held expressions (no F): {name: model file}."""
@@ -398,15 +398,15 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
     t0 = time.perf_counter()
     roots = {label: plain_capture(sims.pop(label), rig, tests / "calibration" / label, work / "actor.usda")[0]
              for label in calibration if label in sims}
-    calibrated = calibrated_h(roots, tests / "calibration", work)
+    calibrated = session_models(roots, tests / "calibration", work)
     calibrating = time.perf_counter() - t0
     chosen, ratios = choose_removal(roots, band_paths(work, args), tests / "calibration") if bands else (None, {})
     if bands:
         emit(case="tissue band chosen on the calibration session", actor=actor_name, **tag, chosen=chosen, held_expression_spread_ratio=ratios)
-    session_choice, left = choose_on_session(roots, band_paths(work, args), calibrated["linear_response"], tests / "calibration")
+    response = load_model(calibrated["linear_response"])
+    session_choice, left = choose_on_session(roots, band_paths(work, args), response, tests / "calibration")
     emit(case="removal chosen on the session's motion left", actor=actor_name, **tag, chosen=session_choice, session_motion_left=left)
     takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work, calibrated["linear_response"]) for label, sim in sims.items()}
-    response = load_model(calibrated["linear_response"])
     for label in ("dialog_walk", "dialog_run", "platform_8hz"):
         if label in takes:
             emit(**removal_case(actor_name, label, takes[label], models, fv, bands, chosen, response, session_choice), **tag)

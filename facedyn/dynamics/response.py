@@ -47,6 +47,7 @@ from facedyn.geometry import quaternion
 
 SETTLE_S = 0.4  # the simulated sessions ease their expression in over 0.3 s
 RIDGE = 0.1  # penalty per frame on the standardized skull features
+MIN_ROWS = 20  # settled frames a take needs to count
 
 
 def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: float = SETTLE_S, ridge: float = RIDGE) -> DynamicsModel:
@@ -59,7 +60,6 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
         raise ValueError(f"fit_linear_response needs a synthesis model as its template, got a {model.kind!r} model")
     if not ridge > 0:
         raise ValueError(f"ridge must be positive, got {ridge}")
-    skull_input = model.skull_input
     features, rotations, targets, described = [], [], [], []
     for take in map(TrainingSequence.coerce, takes):
         b, r, x = _take_rows(take, model, settle_s)
@@ -73,11 +73,16 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
     left = cross_validated_left(features, rotations, targets, ridge) if len(described) > 1 else None
     network = _linear_network(model.network.spec, weights, scale)
     record = {"response": "linear", "takes": described, "rows": int(sum(len(b) for b in features)), "settle_s": float(settle_s),
-              "ridge": float(ridge), "skull_motion": skull_input.to_json(),
-              "session_cross_validated_left": None if left is None else round(left, 4)}
+              "ridge": float(ridge), "session_cross_validated_left": None if left is None else round(left, 4)}
     info = {**copy.deepcopy(model.info), "calibration": record, "validation": None}
     return DynamicsModel(kind="synthesis", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
-                         arrays=dict(model.arrays), skull_motion=skull_input)
+                         arrays=dict(model.arrays), skull_motion=model.skull_input)
+
+
+def settled_frames(frame_count: int, fps: float, settle_s: float, model: DynamicsModel) -> slice:
+    """The frames of a take a response is fitted on: after the expression settles, before the
+    skull windows read past the take's end."""
+    return slice(int(round(settle_s * fps)), frame_count - model.skull_input.future - 1)
 
 
 def cross_validated_left(features: list, rotations: list, targets: list, ridge: float) -> float:
@@ -148,15 +153,14 @@ def _take_rows(take: TrainingSequence, model: DynamicsModel, settle_s: float) ->
     fps = check_fps(take.fps)
     model.check_compatible(fps=fps)
     t, q = check_transforms(take.translate, take.orient, len(pts))
-    first = int(round(settle_s * fps))
-    last = len(pts) - model.skull_input.future - 1  # later windows read zeros past the take's end
-    if last - first < 20:
-        raise ValueError(f"take {take.name!r} has {len(pts)} frames; a linear response needs at least 20 after its first "
+    keep = settled_frames(len(pts), fps, settle_s, model)
+    rows = keep.stop - keep.start
+    if rows < MIN_ROWS:
+        raise ValueError(f"take {take.name!r} has {len(pts)} frames; a linear response needs at least {MIN_ROWS} after its first "
                          f"{settle_s:g} s (the expression settling) and before its last {model.skull_input.future + 1}")
     x, _ = replace_spikes(skull_space(pts[:, model.face.samples], t, q, take.space))
-    keep = slice(first, last)
     b = model.skull_input.features(t, q, model.face.landmarks, fps)[keep].astype(np.float64)
-    x = x[keep].reshape(last - first, -1)
+    x = x[keep].reshape(rows, -1)
     r = quaternion.to_matrix(q[keep]).reshape(-1, 9)
     return b - b.mean(0), r - r.mean(0), x - x.mean(0)
 

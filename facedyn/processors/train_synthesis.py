@@ -78,6 +78,8 @@ class TrainSynthesisProcessor(Processor):
             face = quasistatic.face  # H uses F's samples and landmarks
         calibrated = None if params["calibrate"] is None else calibration_model(params["calibrate"], first, frame)
         linear = params["response"] == "linear"
+        if linear:
+            check_session_lengths(takes, calibrated, params["settle"])
         description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes), "response": params["response"],
                        "quasistatic": params["quasistatic"], "skull": params["skull"], "epochs": None if linear else epochs_of(params, calibrated),
                        "actor": frame.get("actor"), "calibrate": None if calibrated is None else str(params["calibrate"])}
@@ -125,8 +127,23 @@ def check_sources(params: dict) -> None:
                              "skull input the linear response takes")
         if params["quasistatic"] is not None:
             raise UsageError("--response linear fits held expressions without a quasistatic source; leave out --quasistatic")
+        if params["epochs"] is not None:
+            raise UsageError("--epochs trains a network; --response linear is fitted in closed form")
     elif params["quasistatic"] is None:
         raise UsageError("--quasistatic MODEL|truth is required: what gives the takes' quasistatic shapes")
+
+
+def check_session_lengths(takes: list, model, settle_s: float) -> None:
+    """Every session take keeps enough frames after --settle for the response to count it."""
+    from facedyn.dynamics.response import MIN_ROWS, settled_frames
+    from facedyn.usd.errors import TakeError
+
+    for name, perf in takes:
+        keep = settled_frames(perf.frame_count, perf.fps, settle_s, model)
+        if keep.stop - keep.start < MIN_ROWS:
+            raise TakeError(f"take {name!r}: {perf.frame_count} frames leave {max(keep.stop - keep.start, 0)} after "
+                            f"--settle {settle_s:g} s and the skull window's last {model.skull_input.future + 1}; a linear response "
+                            f"needs {MIN_ROWS} per take")
 
 
 def epochs_of(params: dict, calibrated) -> int:

@@ -203,6 +203,11 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
                "--skull", "truth", "--settle", "0.3") == 0
     report = json.loads(capsys.readouterr().out)
     assert report["summary"]["response"] == "linear" and 0 < report["summary"]["session_cross_validated_left"] < 2
+    assert cli("train-synthesis", *session, "-o", tmp_path / "again.synthesis", "--calibrate", models / "h.synthesis", "--response", "linear",
+               "--skull", "truth", "--settle", "0.3") == 0
+    assert (tmp_path / "again.synthesis").read_bytes() == response.read_bytes()  # same inputs, same bytes
+    (tmp_path / "again.synthesis").unlink()
+    capsys.readouterr()
     family, fitted = load_model(models / "h.synthesis"), load_model(response)
     assert np.array_equal(fitted.face.samples, family.face.samples) and fitted.skull_input == family.skull_input
     assert fitted.info["calibration"]["settle_s"] == 0.3 and fitted.info["training"] == family.info["training"]
@@ -221,10 +226,15 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     for flags in (("--response", "linear"), ("--calibrate", models / "h.synthesis", "--response", "linear", "--quasistatic", models / "f.removal")):
         assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", *flags) == 2
     assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth") == 2  # no --quasistatic
+    assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", "--calibrate", models / "h.synthesis",
+               "--response", "linear", "--epochs", "3") == 2
+    assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", "--calibrate", models / "h.synthesis",
+               "--response", "linear", "--settle", "0.95") == 1  # 1 s takes: nothing settled is left
     assert cli("remove", root, "-o", take / "bad.usdc", "--model", models / "h.synthesis") != 0
     errors = capsys.readouterr().err
     assert "--response linear needs --calibrate" in errors and "leave out --quasistatic" in errors and "--quasistatic MODEL|truth is required" in errors
     assert "a synthesis model (network H), which reads the quasistatic shape" in errors and "Traceback" not in errors
+    assert "--epochs trains a network" in errors and "after --settle 0.95 s" in errors and "internal error" not in errors
     assert sorted(p.name for p in tmp_path.rglob("*")) == before
 
 
