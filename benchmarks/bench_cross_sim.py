@@ -35,8 +35,12 @@ goes on training the family's H on them (100 epochs; no truth: F's output is y(t
   usdfacedyn train-synthesis CALIBRATION_TAKES --calibrate H.synthesis --response linear
 fits the actor's linear response to the skull on them (no F, no truth: each take holds one
 expression; facedyn.dynamics.response). Synthesis reports H_calibrated and linear_response
-beside the family's H; removal reports linear_response (`remove --model` with it) beside
-the F's.
+beside the family's H; removal reports linear_response (`remove --model` with it) and
+mean_of_family_F_and_linear_response (`remove --model F --blend RESPONSE`) beside the F's,
+and removal_chosen_on_session_motion_left: the candidate (each F, the response, the mean)
+that leaves the least of the session's motion beyond its held shapes and sag (`evaluate
+--session --removal M [--blend N]`, the response's own takes each removed by the response
+fitted without them; no truth).
 Tissue band (`--soft-hz-bands`, default 5-6.5 and 7.5-9 Hz): the recommended F is trained
 once more per band, each on its own corpus (`synth ... --soft-hz BAND`: the same protocol and
 seeds, the tissue's soft frequency drawn from the band; the same budget), and each test actor
@@ -110,6 +114,7 @@ F_VARIANTS = {  # name: (train-removal --target, --skull-features, its other fla
     "F_paper": ("moving-average", "velocity", ("--exclude", "dialog*")),
 }
 RECOMMENDED = "F_truth_acc"
+BLEND = "mean_of_family_F_and_linear_response"  # remove --model F --blend RESPONSE
 SESSION_SECONDS = 4.5  # per held expression of the calibration session
 CALIBRATION = (  # (take, motion, held expression) of each test actor's calibration session
     ("cal_smile_platform6hz", "platform:6", "smile"), ("cal_brow_platform7hz", "platform:7", "brow_raise"),
@@ -205,17 +210,20 @@ def choose_removal(roots: dict[str, Path], candidates: dict[str, Path], folder: 
     return (min(scored, key=scored.get) if scored else "family"), ratios
 
 
-def choose_on_session(roots: dict[str, Path], candidates: dict[str, Path], response, folder: Path) -> tuple[str, dict]:
-    """The removal (a candidate F, or the actor's linear response) that leaves the least of the
-    session's motion beyond its held shapes and sag, no truth: `usdfacedyn evaluate --session
-    --removal F` on the session's takes, and the response's own leave-one-take-out figure
-    (recorded by train-synthesis); (its name, every candidate's fraction)."""
+def choose_on_session(roots: dict[str, Path], candidates: dict[str, Path], response: Path, folder: Path) -> tuple[str, dict]:
+    """The removal (a candidate F, the actor's linear response, or the mean of the family F's
+    and the response's) that leaves the least of the session's motion beyond its held
+    shapes and sag, no truth: `usdfacedyn evaluate --session --removal M [--blend N]` on the
+    session's takes (the response's own takes each removed by the response fitted without
+    them); (its name, every candidate's fraction)."""
+    runs = {name: ("--removal", str(model)) for name, model in candidates.items()}
+    runs["linear_response"] = ("--removal", str(response))
+    runs[BLEND] = ("--removal", str(candidates["family"]), "--blend", str(response))
     left = {}
-    for name, model in candidates.items():
+    for name, flags in runs.items():
         out = folder / f"session_{name}"
-        usdfacedyn("evaluate", *map(str, roots.values()), "--session", "true", "--removal", str(model), "-o", str(out))
+        usdfacedyn("evaluate", *map(str, roots.values()), "--session", "true", *flags, "-o", str(out))
         left[name] = json.loads((out / "report.json").read_text())["session"]["motion_left_beyond_sag"]
-    left["linear_response"] = response.info["calibration"]["session_cross_validated_left"]
     return min(left, key=left.get), left
 
 
@@ -252,6 +260,9 @@ class TestTake:
         layer = folder / "quasistatic.linear_response.usdc"
         usdfacedyn("remove", str(root), "-o", str(layer), "--model", str(response))
         self.removed_by_response = read_layers([layer, root])
+        layer = folder / f"quasistatic.{BLEND}.usdc"
+        usdfacedyn("remove", str(root), "-o", str(layer), "--model", str(models / f"{RECOMMENDED}.removal"), "--blend", str(response))
+        self.removed_by_blend = read_layers([layer, root])
         self.synthesized = {"H": self.synthesize(models / "H.synthesis", "synthesized.usdc")}
 
     def synthesize(self, model: Path, name: str):
@@ -303,7 +314,9 @@ def removal_case(actor_name: str, label: str, take: TestTake, models: dict, fv, 
     result["linear_response_solved"] = score(take.removed_by_response.offsets, truth, fv)
     _, offsets = remove_with_response(take.tracked_true_skull, take.truth.skull_translate, take.truth.skull_orient, take.truth.fps, response)
     result["linear_response_true_skull_upper_bound"] = score(offsets, truth, fv)
-    chosen_key = {"linear_response": "linear_response_solved", "family": f"{RECOMMENDED}_solved"}.get(session_choice, f"{RECOMMENDED}_{session_choice}_solved")
+    result[f"{BLEND}_solved"] = score(take.removed_by_blend.offsets, truth, fv)
+    chosen_key = {"linear_response": "linear_response_solved", "family": f"{RECOMMENDED}_solved", BLEND: f"{BLEND}_solved"}.get(
+        session_choice, f"{RECOMMENDED}_{session_choice}_solved")
     result["removal_chosen_on_session_motion_left_solved"] = result[chosen_key]
     return result
 
@@ -404,7 +417,7 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
     if bands:
         emit(case="tissue band chosen on the calibration session", actor=actor_name, **tag, chosen=chosen, held_expression_spread_ratio=ratios)
     response = load_model(calibrated["linear_response"])
-    session_choice, left = choose_on_session(roots, band_paths(work, args), response, tests / "calibration")
+    session_choice, left = choose_on_session(roots, band_paths(work, args), calibrated["linear_response"], tests / "calibration")
     emit(case="removal chosen on the session's motion left", actor=actor_name, **tag, chosen=session_choice, session_motion_left=left)
     takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work, calibrated["linear_response"]) for label, sim in sims.items()}
     for label in ("dialog_walk", "dialog_run", "platform_8hz"):

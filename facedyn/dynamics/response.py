@@ -31,6 +31,7 @@ another simulator family; the README quotes it.
 from __future__ import annotations
 
 import copy
+import dataclasses
 from typing import Iterable
 
 import numpy as np
@@ -113,6 +114,40 @@ def _solve(features: list, rotations: list, targets: list, ridge: float) -> tupl
     penalty = np.concatenate([np.full(b.shape[1], ridge * len(b)), np.full(9, 1e-9 * len(b))])
     solution = np.linalg.solve(design.T @ design + np.diag(penalty), design.T @ np.concatenate(targets))
     return solution[: b.shape[1]], scale
+
+
+def calibration_names(model: DynamicsModel) -> dict[str, int]:
+    """The takes a linear response was fitted on: {name: frames}."""
+    return {t["name"]: int(t["frames"]) for t in model.info["calibration"]["takes"]}
+
+
+def remove_left_out(model: DynamicsModel, takes: list) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each of the response's own calibration takes removed by the response refitted on the
+    others, in order: [(quasistatic skull-space points, offsets)], float32.
+
+    What the response does to a take it has seen flatters it; refitted without the take (the
+    model's own settle and ridge), it removes as it would from a new capture, so its
+    figures on its session compare with a removal model's (`usdfacedyn evaluate --session
+    --removal RESPONSE`). takes: TrainingSequences, exactly the model's calibration takes.
+    """
+    if not is_linear_response(model):
+        raise ValueError("remove_left_out needs a linear response (fit_linear_response)")
+    takes = [TrainingSequence.coerce(take) for take in takes]
+    given = {take.name: len(take.points) for take in takes}
+    if given != calibration_names(model) or len(given) != len(takes):
+        raise ValueError(f"remove_left_out needs the response's calibration takes {sorted(calibration_names(model))}, "
+                         f"each whole; got {sorted(given)}")
+    if len(takes) < 2:
+        raise ValueError("a response fitted on one take has no other take to be refitted on")
+    record = model.info["calibration"]
+    rows = [_take_rows(take, model, record["settle_s"]) for take in takes]
+    removed = []
+    for k, take in enumerate(takes):
+        others = [rows[i] for i in range(len(rows)) if i != k]
+        weights, scale = _solve(*(list(part) for part in zip(*others)), record["ridge"])
+        refitted = dataclasses.replace(model, network=_linear_network(model.network.spec, weights, scale))
+        removed.append(remove_with_response(take.points, take.translate, take.orient, take.fps, refitted, space=take.space, device="cpu"))
+    return removed
 
 
 def is_linear_response(model: DynamicsModel) -> bool:

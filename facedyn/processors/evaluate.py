@@ -13,7 +13,11 @@ each holding one expression: the fraction of their motion beyond the held shapes
 sag that follows the head that the removal leaves (the number `train-synthesis --response
 linear` records for the actor's linear response, by leaving each take out). With `--removal MODEL`, the takes are read as `remove` reads them
 (stabilized) and that model's removal is evaluated, in memory: candidate models compare on
-one session without attaching (or writing) any layer.
+one session without attaching (or writing) any layer. MODEL may be a removal model (F) or
+an actor's linear response; given the response's own calibration takes, each is removed by
+the response refitted without it (facedyn.dynamics.response.remove_left_out), so its
+figures are those of a new capture. `--blend MODEL` evaluates the mean of the two models'
+removals, as `remove --blend` makes it.
 """
 from __future__ import annotations
 
@@ -48,8 +52,10 @@ class EvaluateProcessor(Processor):
         Parameter("frequency", float, None, "the frequency (Hz) whose residual to report (default: the skull motion's peak)",
                   above=0.0, maximum=1000.0, metavar="HZ"),
         Parameter("synthesis", Path, None, "a synthesis model: also re-synthesize each take under its own motion", metavar="MODEL"),
-        Parameter("removal", Path, None, "evaluate this removal model on the stabilized takes instead of the removal they "
-                  "carry (nothing is written to them)", metavar="MODEL"),
+        Parameter("removal", Path, None, "evaluate this removal model (F, or an actor's linear response) on the stabilized takes "
+                  "instead of the removal they carry (nothing is written to them)", metavar="MODEL"),
+        Parameter("blend", Path, None, "with --removal: evaluate the mean of its removal and this model's (as remove --blend)",
+                  metavar="MODEL"),
     )
 
     def prepare(self, request: Request) -> Plan:
@@ -59,15 +65,18 @@ class EvaluateProcessor(Processor):
         if not request.inputs:
             raise UsageError("give at least one TAKE")
         params = request.params
+        if params["blend"] is not None and params["removal"] is None:
+            raise UsageError("--blend MODEL averages with --removal MODEL's removal; give --removal too")
         takes = []
-        removal = None
+        removals = []
         reads = QUASISTATIC_BELOW if params["removal"] is None else REMOVAL_READS
         for path in request.inputs:
             check_length(path, reads, request.frames)
             perf, _ = read_take_below(path, reads, frames=request.frames)
             if params["removal"] is not None:
-                removal = removal or fitting_model(params["removal"], perf, "removal")
-                check_skull_frame(path, perf, params["removal"], removal)
+                removals = removals or [removal_model(params[flag], perf, flag) for flag in ("removal", "blend") if params[flag] is not None]
+                for flag, model in zip(("removal", "blend"), removals):
+                    check_skull_frame(path, perf, params[flag], model)
             elif perf.offsets is None:
                 raise TakeError(f"{path}: no removed offsets (primvars:facedyn:dynamicsOffset); run `usdfacedyn remove` first")
             if perf.frame_count < 8:
@@ -77,20 +86,22 @@ class EvaluateProcessor(Processor):
             takes.append((Path(path), perf))
         if params["held_expression"] and len(takes) < 2:
             raise UsageError("--held-expression compares takes: give at least two")
+        for flag, model in zip(("removal", "blend"), removals):
+            check_response_takes(params[flag], model, takes)
         synthesis = None if params["synthesis"] is None else fitting_model(params["synthesis"], takes[0][1], "synthesis")
         description = {"takes": [str(p) for p, _ in takes], "frames": [p.frame_count for _, p in takes],
                        "held_expression": params["held_expression"], "session": params["session"], "synthesis": str(params["synthesis"] or ""),
-                       "removal": str(params["removal"] or "the takes' own")}
-        return Plan(description, (request, takes, synthesis, removal))
+                       "removal": str(params["removal"] or "the takes' own"), "blend": str(params["blend"] or "")}
+        return Plan(description, (request, takes, synthesis, removals))
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
-        request, read, synthesis, removal = plan.state
+        request, read, synthesis, removals = plan.state
         params = request.params
+        if removals:
+            read = removed_by(read, removals)
         progress.start("evaluate takes", len(read))
         takes, per_take = [], []
         for path, perf in read:
-            if removal is not None:
-                perf = removed_by(perf, removal)
             takes.append((path, perf))
             per_take.append(take_diagnostics(path, perf, params["frequency"], synthesis))
             progress.advance()
@@ -123,12 +134,59 @@ def fitting_model(path: Path, perf, kind: str):
     return model
 
 
-def removed_by(perf, model):
-    """The stabilized take as `remove` with `model` would leave it: quasistatic points and the removed offsets."""
-    from facedyn.dynamics.removal import remove_dynamics
+def removal_model(path: Path, perf, flag: str):
+    """The --removal or --blend model: a removal model (F) or an actor's linear response that fits the takes."""
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.dynamics.response import is_linear_response
 
-    quasistatic, offsets = remove_dynamics(perf.points, *perf.skull(), perf.fps, model)
-    return replace(perf, points=quasistatic, offsets=offsets)
+    model = load_model(path, topology=perf.topology, fps=perf.fps)
+    if model.kind != "removal" and not is_linear_response(model):
+        raise UsageError(f"--{flag} {path}: a synthesis model (network H); this needs a removal model (F) or an actor's linear "
+                         "response (train-synthesis --response linear)")
+    return model
+
+
+def check_response_takes(path: Path, model, takes: list) -> None:
+    """A linear response is evaluated on new takes, or on its whole calibration session (each
+    take removed by the response fitted without it); a part of that session is neither."""
+    from facedyn.dynamics.response import calibration_names, is_linear_response
+    from facedyn.processors.training_inputs import take_name
+
+    if not is_linear_response(model):
+        return
+    fitted = calibration_names(model)
+    given = {take_name(root): perf.frame_count for root, perf in takes}
+    if set(given) & set(fitted) and (given != fitted or len(given) != len(takes)):
+        raise UsageError(f"{path} was fitted on the whole takes {', '.join(sorted(fitted))}; give all of them, whole (each is then "
+                         f"removed by the response fitted without it), or none of them, not {', '.join(sorted(given))}"
+                         f"{' with --frames' if given.keys() == fitted.keys() else ''}")
+
+
+def removed_by(read: list, models: list) -> list:
+    """The stabilized takes as `remove` with the models (averaged, as --blend) would leave
+    them: quasistatic points and the removed offsets; a linear response's own calibration
+    takes are each removed by the response refitted without them."""
+    outputs = [_removals(read, model) for model in models]
+    removed = []
+    for k, (path, perf) in enumerate(read):
+        quasistatic, offsets = (np.mean([output[k][i] for output in outputs], axis=0).astype(np.float32) for i in (0, 1))
+        removed.append((path, replace(perf, points=quasistatic, offsets=offsets)))
+    return removed
+
+
+def _removals(read: list, model) -> list:
+    """[(quasistatic, offsets)] of each take removed by one model."""
+    from facedyn.dynamics.removal import remove_dynamics
+    from facedyn.dynamics.response import calibration_names, is_linear_response, remove_left_out, remove_with_response
+    from facedyn.dynamics.training import TrainingSequence
+    from facedyn.processors.training_inputs import take_name
+
+    if model.kind == "removal":
+        return [remove_dynamics(perf.points, *perf.skull(), perf.fps, model) for _, perf in read]
+    named = [TrainingSequence.from_performance(perf, take_name(path)) for path, perf in read]
+    if is_linear_response(model) and named[0].name in calibration_names(model):  # its own session (check_response_takes)
+        return remove_left_out(model, named)
+    return [remove_with_response(perf.points, *perf.skull(), perf.fps, model) for _, perf in read]
 
 
 def check_length(path: Path, below: str, frames) -> None:

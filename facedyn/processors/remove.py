@@ -1,7 +1,10 @@
 """The remove processor: subtract the secondary dynamics that network F predicts.
 
 Or that an actor's linear response predicts from the skull alone (`train-synthesis
---response linear`, facedyn.dynamics.response): `--model` takes either.
+--response linear`, facedyn.dynamics.response): `--model` takes either. `--blend MODEL`
+removes the mean of two models' dynamics (e.g. F's and the actor's response, whose errors
+are partly independent); `usdfacedyn evaluate --session --removal M --blend N` scores the
+mean on the actor's session before a take is touched.
 
 Reads the stabilized take (the layers below the quasistatic role) and writes the
 quasistatic layer: points = the quasistatic skin in skull space, and the removed dynamics
@@ -35,50 +38,72 @@ class RemoveProcessor(Processor):
     parameters = (
         Parameter("model", Path, help="the removal model file (from train-removal), or an actor's linear response "
                   "(train-synthesis --response linear)", metavar="MODEL"),
+        Parameter("blend", Path, None, "a second removal model or linear response: remove the mean of the two models' dynamics",
+                  metavar="MODEL"),
         Parameter("backend", str, "auto", "feature and Laplacian kernels", BACKENDS),
         Parameter("device", str, "auto", "torch device for the network: auto, cpu, cuda, cuda:N", check=check_device),
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.dynamics.response import is_linear_response
+        from facedyn.dynamics.modelfile import load_model
 
+        params = request.params
         reader, model = reader_with_model(request, self.writes.role, "removal", "synthesis")
-        if model.kind == "synthesis" and not is_linear_response(model):
-            raise UsageError(f"--model {request.params['model']}: a synthesis model (network H), which reads the quasistatic shape it would "
-                             "make; remove needs a removal model (F) or an actor's linear response (train-synthesis --response linear)")
-        description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "model": str(request.params["model"]),
-                       "samples": int(len(model.face.samples))}
-        return Plan(description, (reader, model, request.params))
+        check_removes(model, "model", params["model"])
+        models = [model]
+        if params["blend"] is not None:
+            blend = load_model(params["blend"], topology=reader.head.topology, fps=reader.fps)
+            check_removes(blend, "blend", params["blend"])
+            check_skull_frame(request.inputs[0], reader.head, params["blend"], blend)
+            models.append(blend)
+        description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "model": str(params["model"]),
+                       "blend": str(params["blend"] or ""), "samples": int(len(model.face.samples))}
+        return Plan(description, (reader, models, params))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
-        from facedyn.dynamics.removal import remove_dynamics
-        from facedyn.dynamics.response import remove_with_response
         from facedyn.usd import schema
         from facedyn.usd.layers import LayerContent
 
-        reader, model, params = plan.state
+        reader, models, params = plan.state
         source = reader.source
         layer = LayerContent(frames=reader.time_codes, mesh_path=source.mesh_path, skull_path=source.skull_path,
-                             face=schema.FaceAttributes(role=self.writes.role, skin_samples=model.face.samples))
+                             face=schema.FaceAttributes(role=self.writes.role, skin_samples=models[0].face.samples))
         stats = OffsetStats("removed")
 
         def chunks():
             progress.start("remove dynamics", reader.frame_count)
-            for window in reader.windows(CHUNK_FRAMES, context_frames(model)):
-                translate, orient = window.take.skull()
-                if model.kind == "removal":
-                    quasistatic, offsets = remove_dynamics(window.take.points, translate, orient, reader.fps, model,
-                                                           backend=params["backend"], device=params["device"])
-                else:
-                    quasistatic, offsets = remove_with_response(window.take.points, translate, orient, reader.fps, model,
-                                                                device=params["device"])
+            for window in reader.windows(CHUNK_FRAMES, max(map(context_frames, models))):
+                removed = [removal_of(window.take, reader.fps, model, params) for model in models]
+                quasistatic, offsets = removed[0] if len(removed) == 1 else \
+                    (np.mean([r[i] for r in removed], axis=0).astype(np.float32) for i in (0, 1))
                 yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=quasistatic[window.inner],
                                    offsets=stats.add(offsets[window.inner]))
                 progress.advance(window.stop - window.start)
             progress.finish()
 
-        return LayerOutput(layer=layer, timing=source.timing, inputs=model_inputs(source, params["model"]),
+        paths = [params["model"]] + ([params["blend"]] if params["blend"] is not None else [])
+        return LayerOutput(layer=layer, timing=source.timing, inputs=model_inputs(source, *paths),
                            summary=stats.summary, chunks=chunks())
+
+
+def check_removes(model, flag: str, path: Path) -> None:
+    """remove takes a removal model (F) or an actor's linear response, not a synthesis network."""
+    from facedyn.dynamics.response import is_linear_response
+
+    if model.kind == "synthesis" and not is_linear_response(model):
+        raise UsageError(f"--{flag} {path}: a synthesis model (network H), which reads the quasistatic shape it would "
+                         "make; remove needs a removal model (F) or an actor's linear response (train-synthesis --response linear)")
+
+
+def removal_of(take, fps: float, model, params: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(quasistatic skull-space points, offsets) of a chunk removed by one model."""
+    from facedyn.dynamics.removal import remove_dynamics
+    from facedyn.dynamics.response import remove_with_response
+
+    translate, orient = take.skull()
+    if model.kind == "removal":
+        return remove_dynamics(take.points, translate, orient, fps, model, backend=params["backend"], device=params["device"])
+    return remove_with_response(take.points, translate, orient, fps, model, device=params["device"])
 
 
 def reader_with_model(request: Request, role_name: str, *kinds: str):
@@ -124,9 +149,9 @@ def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:
                         "--actor ACTOR, the actor made from the rig or takes the model was trained on")
 
 
-def model_inputs(source, model_path: Path) -> list[str]:
-    """The provenance inputs of a layer computed from a take and a model file."""
-    return list(source.inputs) + [str(Path(model_path).resolve())]
+def model_inputs(source, *model_paths: Path) -> list[str]:
+    """The provenance inputs of a layer computed from a take and model files."""
+    return list(source.inputs) + [str(Path(path).resolve()) for path in model_paths]
 
 
 class OffsetStats:

@@ -1,6 +1,7 @@
 """Takes for training, from corpus folders or take roots, with the skull they should use.
 
-A stabilized take carries its solved skull. A simulated corpus take also has its true
+A stabilized take carries its solved skull (read below any removal attached to it: training
+reads the capture, not a quasistatic take). A simulated corpus take also has its true
 skull kept apart (facedyn.usd.corpus); training on it (`skull="truth"`) separates the
 networks' accuracy from the stabilizer's.
 """
@@ -13,7 +14,7 @@ from pxr import Sdf, Usd
 from facedyn.performance import Performance
 from facedyn.usd.corpus import CORPUS_INDEX, read_corpus_index
 from facedyn.usd.errors import TakeError
-from facedyn.usd.take import TakeSource, read_stage, read_take
+from facedyn.usd.take import TakeSource, read_stage, read_take_below
 from facedyn.usd.timing import Timing
 
 SKULL_SOURCES = ("take", "truth")
@@ -50,7 +51,7 @@ def read_training_take(root: Path, skull: str = "take", frames=None) -> tuple[Pe
         layer.subLayerPaths = [str(truth_skull), str(capture)]
         return read_stage(Usd.Stage.Open(layer), truth_skull, frames=frames)
     path = folder / "take.usda" if folder else root
-    perf, source = read_take(path, frames=frames)
+    perf, source = read_take_below(path, "quasistatic", frames=frames)  # the stabilized capture, not a removal attached above it
     if perf.skull_orient is None or perf.role == "captured":
         raise TakeError(f"{path}: the take is not stabilized (run `usdfacedyn stabilize` first, or train with --skull truth)")
     return perf, source

@@ -238,6 +238,60 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     assert sorted(p.name for p in tmp_path.rglob("*")) == before
 
 
+def test_a_linear_response_is_scored_left_out_on_its_session_and_blends_with_f(corpus, capsys, tmp_path):
+    """evaluate --session --removal RESPONSE on the response's own takes removes each with the
+    response fitted without it (as fitting on the others and removing would); training reads
+    a take's capture, not a removal attached to it; remove --blend removes the mean of two
+    models' dynamics; partial sessions and a network H are refused."""
+    import json
+    import shutil
+
+    from facedyn.usd.take import read_layers
+
+    folder, models = corpus
+    roots = []
+    for name in ("smile_walk", "smile_hop", "jaw_open_platform7", "jaw_open_platform10"):
+        shutil.copytree(folder / name, tmp_path / name)
+        root = tmp_path / name / "take.usda"
+        assert cli("stabilize", root, "-o", root.parent / "stabilized.usdc", "--attach", root) == 0
+        roots.append(root)
+    fit = ("--calibrate", models / "h.synthesis", "--response", "linear", "--settle", "0.3")
+    response = tmp_path / "actor.synthesis"
+    assert cli("train-synthesis", *roots, "-o", response, *fit) == 0
+    assert cli("evaluate", *roots, "--session", "true", "--removal", response, "-o", tmp_path / "left_out") == 0
+    assert cli("evaluate", *roots, "--session", "true", "--removal", models / "f.removal", "--blend", response, "-o", tmp_path / "blend") == 0
+    for k, root in enumerate(roots):  # by hand: fitted on the other takes (before any is removed), removed from this one
+        assert cli("train-synthesis", *(r for r in roots if r != root), "-o", tmp_path / f"without_{k}.synthesis", *fit) == 0
+    for k, root in enumerate(roots):
+        assert cli("remove", root, "-o", root.parent / "quasistatic.usdc", "--attach", root, "--model", tmp_path / f"without_{k}.synthesis") == 0
+    assert cli("evaluate", *roots, "--session", "true", "-o", tmp_path / "by_hand") == 0
+    assert cli("train-synthesis", *roots, "-o", tmp_path / "refit.synthesis", *fit) == 0  # training reads below the removal now attached
+    assert (tmp_path / "refit.synthesis").read_bytes() == response.read_bytes()
+    left_out, blend, by_hand = (json.loads((tmp_path / d / "report.json").read_text())["session"]["motion_left_beyond_sag"]
+                                for d in ("left_out", "blend", "by_hand"))
+    assert 0 < left_out < 1.5 and left_out == pytest.approx(by_hand, abs=1e-4) and 0 < blend < 1.5 and blend != left_out
+
+    take = tmp_path / "take"
+    shutil.copytree(folder / "pucker_walk", take)
+    root = take / "take.usda"
+    assert cli("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root) == 0
+    layers = {}
+    for name, flags in (("f", ("--model", models / "f.removal")), ("response", ("--model", response)),
+                        ("blend", ("--model", models / "f.removal", "--blend", response))):
+        assert cli("remove", root, "-o", take / f"quasistatic.{name}.usdc", *flags) == 0
+        layers[name] = read_layers([take / f"quasistatic.{name}.usdc", root])
+    np.testing.assert_allclose(layers["blend"].offsets, (layers["f"].offsets + layers["response"].offsets) / 2, atol=1e-6)
+    np.testing.assert_allclose(layers["blend"].points, (layers["f"].points + layers["response"].points) / 2, atol=1e-5)
+    capsys.readouterr()
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    assert cli("evaluate", *roots[:2], "--session", "true", "--removal", response, "-o", tmp_path / "part") == 2
+    assert cli("evaluate", *roots, "--session", "true", "--blend", response, "-o", tmp_path / "part") == 2
+    assert cli("remove", root, "-o", take / "bad.usdc", "--model", models / "f.removal", "--blend", models / "h.synthesis") == 2
+    errors = capsys.readouterr().err
+    assert "give all of them, whole" in errors and "give --removal too" in errors and "--blend" in errors and "network H" in errors
+    assert "Traceback" not in errors and sorted(p.name for p in tmp_path.rglob("*")) == before
+
+
 def _stack(root):
     layer = Sdf.Layer.OpenAsAnonymous(str(root))
     return list(layer.subLayerPaths)
@@ -376,5 +430,5 @@ def test_evaluate_compares_a_removal_model_on_stabilized_takes_without_touching_
         assert {k: v for k, v in a.items() if k != "take"} == pytest.approx({k: v for k, v in b.items() if k != "take"}, rel=1e-3, abs=1e-4)
     capsys.readouterr()
     assert cli("evaluate", *roots, "--removal", models / "h.synthesis", "-o", tmp_path / "wrong") == 2
-    assert "a synthesis model; this needs a removal model" in capsys.readouterr().err
+    assert "a synthesis model (network H); this needs a removal model (F) or an actor's linear response" in capsys.readouterr().err
     assert not (tmp_path / "wrong").exists()
