@@ -96,12 +96,16 @@ def cross_validated_left(features: list, rotations: list, targets: list, ridge: 
     that stiffens with strain or with the expression). The same fraction of a removal
     model's output (`usdfacedyn evaluate --session`) compares the two on one actor.
     """
-    left = []
+    left = [target - (b / scale) @ weights
+            for b, target, (weights, scale) in zip(features, targets, _fits_without_each(features, rotations, targets, ridge))]
+    return motion_left_beyond_sag(left, targets, rotations)
+
+
+def _fits_without_each(features: list, rotations: list, targets: list, ridge: float):
+    """For each take in turn, `_solve` on all the other takes."""
     for k in range(len(features)):
         others = [i for i in range(len(features)) if i != k]
-        weights, scale = _solve([features[i] for i in others], [rotations[i] for i in others], [targets[i] for i in others], ridge)
-        left.append(targets[k] - (features[k] / scale) @ weights)
-    return motion_left_beyond_sag(left, targets, rotations)
+        yield _solve([features[i] for i in others], [rotations[i] for i in others], [targets[i] for i in others], ridge)
 
 
 def _solve(features: list, rotations: list, targets: list, ridge: float) -> tuple[np.ndarray, np.ndarray]:
@@ -140,11 +144,9 @@ def remove_left_out(model: DynamicsModel, takes: list) -> list[tuple[np.ndarray,
     if len(takes) < 2:
         raise ValueError("a response fitted on one take has no other take to be refitted on")
     record = model.info["calibration"]
-    rows = [_take_rows(take, model, record["settle_s"]) for take in takes]
+    features, rotations, targets = (list(part) for part in zip(*(_take_rows(take, model, record["settle_s"]) for take in takes)))
     removed = []
-    for k, take in enumerate(takes):
-        others = [rows[i] for i in range(len(rows)) if i != k]
-        weights, scale = _solve(*(list(part) for part in zip(*others)), record["ridge"])
+    for take, (weights, scale) in zip(takes, _fits_without_each(features, rotations, targets, record["ridge"])):
         refitted = dataclasses.replace(model, network=_linear_network(model.network.spec, weights, scale))
         removed.append(remove_with_response(take.points, take.translate, take.orient, take.fps, refitted, space=take.space, device="cpu"))
     return removed

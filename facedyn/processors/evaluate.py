@@ -29,7 +29,7 @@ import numpy as np
 
 from facedyn.errors import UsageError
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.remove import check_skull_frame
+from facedyn.processors.remove import check_skull_frame, removal_of
 from facedyn.progress import Progress
 
 QUASISTATIC_BELOW = "synthesized"  # evaluate reads what remove wrote: everything below the synthesized role
@@ -176,17 +176,14 @@ def removed_by(read: list, models: list) -> list:
 
 def _removals(read: list, model) -> list:
     """[(quasistatic, offsets)] of each take removed by one model."""
-    from facedyn.dynamics.removal import remove_dynamics
-    from facedyn.dynamics.response import calibration_names, is_linear_response, remove_left_out, remove_with_response
+    from facedyn.dynamics.response import calibration_names, is_linear_response, remove_left_out
     from facedyn.dynamics.training import TrainingSequence
     from facedyn.processors.training_inputs import take_name
 
-    if model.kind == "removal":
-        return [remove_dynamics(perf.points, *perf.skull(), perf.fps, model) for _, perf in read]
-    named = [TrainingSequence.from_performance(perf, take_name(path)) for path, perf in read]
-    if is_linear_response(model) and named[0].name in calibration_names(model):  # its own session (check_response_takes)
-        return remove_left_out(model, named)
-    return [remove_with_response(perf.points, *perf.skull(), perf.fps, model) for _, perf in read]
+    names = [take_name(path) for path, _ in read]
+    if is_linear_response(model) and names[0] in calibration_names(model):  # its own session (check_response_takes)
+        return remove_left_out(model, [TrainingSequence.from_performance(perf, name) for (_, perf), name in zip(read, names)])
+    return [removal_of(perf.points, *perf.skull(), perf.fps, model) for _, perf in read]
 
 
 def check_length(path: Path, below: str, frames) -> None:

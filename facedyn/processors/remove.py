@@ -73,7 +73,8 @@ class RemoveProcessor(Processor):
         def chunks():
             progress.start("remove dynamics", reader.frame_count)
             for window in reader.windows(CHUNK_FRAMES, max(map(context_frames, models))):
-                removed = [removal_of(window.take, reader.fps, model, params) for model in models]
+                removed = [removal_of(window.take.points, *window.take.skull(), reader.fps, model, params["backend"], params["device"])
+                           for model in models]
                 quasistatic, offsets = removed[0] if len(removed) == 1 else \
                     (np.mean([r[i] for r in removed], axis=0).astype(np.float32) for i in (0, 1))
                 yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=quasistatic[window.inner],
@@ -95,15 +96,15 @@ def check_removes(model, flag: str, path: Path) -> None:
                          "make; remove needs a removal model (F) or an actor's linear response (train-synthesis --response linear)")
 
 
-def removal_of(take, fps: float, model, params: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(quasistatic skull-space points, offsets) of a chunk removed by one model."""
+def removal_of(points, translate, orient, fps: float, model, backend: str = "auto", device: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+    """(quasistatic skull-space points, offsets) of stabilized points removed by a removal
+    model (F) or an actor's linear response."""
     from facedyn.dynamics.removal import remove_dynamics
     from facedyn.dynamics.response import remove_with_response
 
-    translate, orient = take.skull()
     if model.kind == "removal":
-        return remove_dynamics(take.points, translate, orient, fps, model, backend=params["backend"], device=params["device"])
-    return remove_with_response(take.points, translate, orient, fps, model, device=params["device"])
+        return remove_dynamics(points, translate, orient, fps, model, backend=backend, device=device)
+    return remove_with_response(points, translate, orient, fps, model, device=device)
 
 
 def reader_with_model(request: Request, role_name: str, *kinds: str):
