@@ -25,7 +25,9 @@ skull input), whose network is one linear layer that reads no stretch: what the 
 cannot say is how an expression changes the tissue's answer. With zero skull acceleration
 it predicts zero dynamics. Since it reads the skull alone, it also removes: the capture
 minus the dynamics it predicts from the solved skull (`remove_with_response`, `usdfacedyn
-remove --model` of a linear response). `benchmarks/bench_cross_sim.py` has what it gives on tissue of
+remove --model` of a linear response), plus its answer to the capture's own skin
+acceleration below the tissue's band, the load of a moving expression
+(facedyn.dynamics.expression_inertia; recorded as `expression_inertia_hz`, the cut-off). `benchmarks/bench_cross_sim.py` has what it gives on tissue of
 another simulator family; the README quotes it.
 """
 from __future__ import annotations
@@ -38,6 +40,7 @@ import numpy as np
 import torch
 
 from facedyn.dynamics.diagnostics import motion_left_beyond_sag
+from facedyn.dynamics.expression_inertia import LOWPASS_HZ, expression_inertia, translation_kernel
 from facedyn.dynamics.features import check_fps
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import Network, NetworkSpec, resolve_device
@@ -74,7 +77,8 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
     left = cross_validated_left(features, rotations, targets, ridge) if len(described) > 1 else None
     network = _linear_network(model.network.spec, weights, scale)
     record = {"response": "linear", "takes": described, "rows": int(sum(len(b) for b in features)), "settle_s": float(settle_s),
-              "ridge": float(ridge), "session_cross_validated_left": None if left is None else round(left, 4)}
+              "ridge": float(ridge), "session_cross_validated_left": None if left is None else round(left, 4),
+              "expression_inertia_hz": LOWPASS_HZ}
     info = {**copy.deepcopy(model.info), "calibration": record, "validation": None}
     return DynamicsModel(kind="synthesis", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
                          arrays=dict(model.arrays), skull_motion=model.skull_input)
@@ -170,15 +174,31 @@ def remove_with_response(points, translate, orient, fps: float, model: DynamicsM
     model.check_compatible(fps=check_fps(fps))
     t, q = check_transforms(translate, orient, len(pts))
     b = model.skull_input.features(t, q, model.face.landmarks, fps)
-    inputs = np.zeros((len(pts), model.network.spec.inputs), np.float32)  # the stretch it does not read stays zero
-    inputs[:, : b.shape[1]] = b
+    d = _respond(model, b, device).reshape(len(pts), -1, 3)
+    skull_points = skull_space(pts, t, q, space)
+    lowpass = model.info["calibration"].get("expression_inertia_hz")
+    if lowpass is not None:  # files fitted before the term remove with the skull alone, as they did
+        skin, _ = replace_spikes(skull_points[:, model.face.samples])
+        kernel = translation_kernel(_raw_weights(model), len(model.face.landmarks), model.skull_input.past, model.skull_input.future)
+        d = d + expression_inertia(kernel, skin - d, fps, model.skull_input.future, lowpass).astype(np.float32)
+    offsets = np.empty((len(pts), pts.shape[1], 3), np.float32)
+    model.propagator().apply_into(np.ascontiguousarray(d, dtype=np.float32), offsets)
+    return skull_points.astype(np.float32) - offsets, offsets
+
+
+def _respond(model: DynamicsModel, skull_features: np.ndarray, device: str = "cpu") -> np.ndarray:
+    """(rows, 3S) float32: the response's samples' offsets for rows of skull features."""
+    inputs = np.zeros((len(skull_features), model.network.spec.inputs), np.float32)  # the stretch it does not read stays zero
+    inputs[:, : skull_features.shape[1]] = skull_features
     network = model.network.to(resolve_device(device)).eval()
     with torch.inference_mode():
-        d = network(torch.from_numpy(inputs).to(next(network.parameters()).device)).cpu().numpy()
-    offsets = np.empty((len(pts), pts.shape[1], 3), np.float32)
-    model.propagator().apply_into(d.reshape(len(pts), -1, 3), offsets)
-    skull_points = skull_space(pts, t, q, space).astype(np.float32)
-    return skull_points - offsets, offsets
+        return network(torch.from_numpy(inputs).to(next(network.parameters()).device)).cpu().numpy()
+
+
+def _raw_weights(model: DynamicsModel) -> np.ndarray:
+    """(skull features, 3S) float64: the response's weights on unscaled skull features (its
+    answer to each feature alone: the network is linear and zero at zero)."""
+    return _respond(model, np.eye(model.skull_input.width * 3 * len(model.face.landmarks), dtype=np.float32)).astype(np.float64)
 
 
 def _take_rows(take: TrainingSequence, model: DynamicsModel, settle_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
