@@ -223,9 +223,7 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     assert np.abs(removed.offsets).max() > 1e-3
     # the same skull, the same dynamics, plus the response's answer to the skin's own slow motion (the expression term)
     term = float(np.sqrt(np.mean(np.square(removed.offsets - synthesized.offsets)) / np.mean(np.square(synthesized.offsets))))
-    with capsys.disabled():
-        print(f"\nremoval beyond synthesis of the same skull: {term:.3f} of its RMS")
-    assert 0.001 < term < 0.25
+    assert 0.001 < term < 0.25  # measured 0.06
     before = sorted(p.name for p in tmp_path.rglob("*"))
     for flags in (("--response", "linear"), ("--calibrate", models / "h.synthesis", "--response", "linear", "--quasistatic", models / "f.removal")):
         assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", *flags) == 2
