@@ -39,6 +39,13 @@ LOWPASS_HZ = 5.0  # below the family's 5-9 Hz tissue band's ring (about 15 % abo
 _ORDER = 2  # Butterworth order, run forwards and backwards
 
 
+def filter_reach(fps: float, lowpass_hz: float = LOWPASS_HZ) -> int:
+    """Frames over which the low-pass's answer to an impulse decays below 1e-7 (a second-order
+    Butterworth's poles decay at sqrt(1/2) 2 pi lowpass_hz per second): the context a chunk of
+    a take needs so that the filter gives what it gives on the whole take."""
+    return int(np.ceil(np.log(1e7) * fps / (np.sqrt(0.5) * 2.0 * np.pi * lowpass_hz)))
+
+
 def translation_kernel(weights: np.ndarray, landmarks: int, past: int, future: int) -> np.ndarray:
     """(past + future + 1, S, 3, 3) float64: K[lag + future][s, :, j] is sample s's offset `lag`
     frames after a unit skull acceleration along j (cm per cm/s^2), lags -future..past.

@@ -29,7 +29,7 @@ import numpy as np
 
 from facedyn.errors import UsageError
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.remove import check_skull_frame, removal_of
+from facedyn.processors.remove import check_skull_frame, mean_removal, removal_of
 from facedyn.progress import Progress
 
 QUASISTATIC_BELOW = "synthesized"  # evaluate reads what remove wrote: everything below the synthesized role
@@ -169,7 +169,7 @@ def removed_by(read: list, models: list) -> list:
     outputs = [_removals(read, model) for model in models]
     removed = []
     for k, (path, perf) in enumerate(read):
-        quasistatic, offsets = (np.mean([output[k][i] for output in outputs], axis=0).astype(np.float32) for i in (0, 1))
+        quasistatic, offsets = mean_removal([output[k] for output in outputs])
         removed.append((path, replace(perf, points=quasistatic, offsets=offsets)))
     return removed
 

@@ -75,8 +75,7 @@ class RemoveProcessor(Processor):
             for window in reader.windows(CHUNK_FRAMES, max(map(context_frames, models))):
                 removed = [removal_of(window.take.points, *window.take.skull(), reader.fps, model, params["backend"], params["device"])
                            for model in models]
-                quasistatic, offsets = removed[0] if len(removed) == 1 else \
-                    (np.mean([r[i] for r in removed], axis=0).astype(np.float32) for i in (0, 1))
+                quasistatic, offsets = mean_removal(removed)
                 yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=quasistatic[window.inner],
                                    offsets=stats.add(offsets[window.inner]))
                 progress.advance(window.stop - window.start)
@@ -107,6 +106,13 @@ def removal_of(points, translate, orient, fps: float, model, backend: str = "aut
     return remove_with_response(points, translate, orient, fps, model, device=device)
 
 
+def mean_removal(removed: list) -> tuple[np.ndarray, np.ndarray]:
+    """(quasistatic points, offsets), float32: the mean of one take's removals by several models (--blend)."""
+    if len(removed) == 1:
+        return removed[0]
+    return tuple(np.mean([r[i] for r in removed], axis=0).astype(np.float32) for i in (0, 1))
+
+
 def reader_with_model(request: Request, role_name: str, *kinds: str):
     """The take below `role_name` (a chunked reader, facedyn.usd.frames) and a model of one of `kinds` that fits it."""
     from facedyn.dynamics.modelfile import load_model
@@ -126,13 +132,19 @@ def context_frames(model) -> int:
 
     Every window a model reads (feature windows, skull motion past and future, smoothing),
     plus the frames its velocities and accelerations difference over, and for F the frames
-    a spike replacement looks at (facedyn.dynamics.spikes).
+    a spike replacement looks at (facedyn.dynamics.spikes). A linear response's expression
+    term reads the skin (spikes replaced) less the skull-driven dynamics, low-passed, through
+    its own skull window again (facedyn.dynamics.expression_inertia).
     """
+    from facedyn.dynamics.expression_inertia import filter_reach
     from facedyn.dynamics.spikes import REACH
 
     motion = model.skull_input
-    spikes = REACH if model.kind == "removal" else 0  # F reads the skin with its spikes replaced
-    return sum(int(w) for w in model.windows.values()) + motion.past + motion.future + 4 + spikes
+    frames = sum(int(w) for w in model.windows.values()) + motion.past + motion.future + 4
+    if model.kind == "removal":  # F reads the skin with its spikes replaced
+        return frames + REACH
+    lowpass = model.info.get("calibration", {}).get("expression_inertia_hz")
+    return frames if lowpass is None else frames + REACH + motion.past + motion.future + filter_reach(model.fps, lowpass)
 
 
 def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:

@@ -186,7 +186,7 @@ def test_train_synthesis_calibrates_an_existing_h_on_an_actors_takes(corpus, cap
     assert not (tmp_path / "bad.synthesis").exists()
 
 
-def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_removes(corpus, capsys, tmp_path):
+def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_removes(corpus, capsys, tmp_path, monkeypatch):
     """--response linear: held-expression takes, no quasistatic source; the model keeps H's
     setup, `synthesize` and `remove` take it, and what it removes is the synthesized dynamics
     of the same skull; misuse is a usage error that writes nothing."""
@@ -224,6 +224,13 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     # the same skull, the same dynamics, plus the response's answer to the skin's own slow motion (the expression term)
     term = float(np.sqrt(np.mean(np.square(removed.offsets - synthesized.offsets)) / np.mean(np.square(synthesized.offsets))))
     assert 0.001 < term < 0.25  # measured 0.06
+    import facedyn.processors.remove as remove
+
+    monkeypatch.setattr(remove, "CHUNK_FRAMES", 16)  # streamed in chunks, the response's removal is the whole take's
+    assert cli("remove", root, "-o", take / "quasistatic.chunked.usdc", "--model", response) == 0
+    capsys.readouterr()
+    chunked = read_layers([take / "quasistatic.chunked.usdc", root])
+    np.testing.assert_allclose(chunked.offsets, removed.offsets, atol=1e-5)
     before = sorted(p.name for p in tmp_path.rglob("*"))
     for flags in (("--response", "linear"), ("--calibrate", models / "h.synthesis", "--response", "linear", "--quasistatic", models / "f.removal")):
         assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", *flags) == 2
