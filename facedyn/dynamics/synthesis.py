@@ -35,6 +35,7 @@ from facedyn.dynamics.features import check_fps
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import SYNTHESIS_HIDDEN, NetworkSpec, resolve_device
 from facedyn.dynamics.removal import remove_dynamics
+from facedyn.dynamics.response import is_linear_response, skull_driven_dynamics
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
@@ -212,15 +213,20 @@ def synthesize_dynamics(
     network = model.network.to(resolve_device(device)).eval()
     dev = next(network.parameters()).device
     samples = nb.sample_count
+    # a linear response reads no stretch, and its stiffening reads neighbouring frames
+    response = skull_driven_dynamics(model, b, device) if is_linear_response(model) else None
     offsets = np.empty((f, n, 3), np.float32)
     points = np.empty((f, n, 3), np.float32)
     with torch.inference_mode():
         for a in range(0, f, int(chunk_frames)):
             z = min(f, a + int(chunk_frames))
-            s = stretch_features(shape[a:z], nb, lengths, backend)
-            inputs = np.concatenate([b[a:z], s.reshape(z - a, -1)], axis=1)
-            d = network(torch.from_numpy(inputs).to(dev)).cpu().numpy().reshape(z - a, samples, 3)
-            propagator.apply_into(d, offsets[a:z])
+            if response is not None:
+                d = response[a:z]
+            else:
+                s = stretch_features(shape[a:z], nb, lengths, backend)
+                inputs = np.concatenate([b[a:z], s.reshape(z - a, -1)], axis=1)
+                d = network(torch.from_numpy(inputs).to(dev)).cpu().numpy().reshape(z - a, samples, 3)
+            propagator.apply_into(np.ascontiguousarray(d), offsets[a:z])
             np.add(y[a:z], offsets[a:z], out=points[a:z])
     return points, offsets
 

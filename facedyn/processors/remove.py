@@ -134,7 +134,8 @@ def context_frames(model) -> int:
     plus the frames its velocities and accelerations difference over, and for F the frames
     a spike replacement looks at (facedyn.dynamics.spikes). A linear response's expression
     term reads the skin (spikes replaced) less the skull-driven dynamics, low-passed, through
-    its own skull window again (facedyn.dynamics.expression_inertia).
+    its own skull window again (facedyn.dynamics.expression_inertia), and its stiffening
+    reads the response over that window once more (facedyn.dynamics.hardening).
     """
     from facedyn.dynamics.expression_inertia import filter_reach
     from facedyn.dynamics.spikes import REACH
@@ -143,7 +144,10 @@ def context_frames(model) -> int:
     frames = sum(int(w) for w in model.windows.values()) + motion.past + motion.future + 4
     if model.kind == "removal":  # F reads the skin with its spikes replaced
         return frames + REACH
-    lowpass = model.info.get("calibration", {}).get("expression_inertia_hz")
+    calibration = model.info.get("calibration", {})
+    if calibration.get("hardening"):  # its stiffening reads the response over its skull window
+        frames += motion.past + motion.future
+    lowpass = calibration.get("expression_inertia_hz")
     return frames if lowpass is None else frames + REACH + motion.past + motion.future + filter_reach(model.fps, lowpass)
 
 

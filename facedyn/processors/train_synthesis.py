@@ -116,6 +116,7 @@ class TrainSynthesisProcessor(Processor):
                    "response": params["response"]}
         if params["response"] == "linear":
             summary["session_cross_validated_left"] = record["session_cross_validated_left"]
+            summary["hardening"] = record["hardening"]
         return FileOutput(partial(save_model, model), summary)
 
 
