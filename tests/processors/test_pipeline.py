@@ -193,7 +193,7 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     import json
     import shutil
 
-    from facedyn.dynamics.modelfile import load_model
+    from facedyn.dynamics.modelfile import load_model, save_model
     from facedyn.usd.take import read_layers
 
     folder, models = corpus
@@ -203,6 +203,7 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
                "--skull", "truth", "--settle", "0.3") == 0
     report = json.loads(capsys.readouterr().out)
     assert report["summary"]["response"] == "linear" and 0 < report["summary"]["session_cross_validated_left"] < 2
+    assert report["summary"]["hardening"] == 0.0  # springs that stiffen with the expression only: no stiffening with motion
     assert cli("train-synthesis", *session, "-o", tmp_path / "again.synthesis", "--calibrate", models / "h.synthesis", "--response", "linear",
                "--skull", "truth", "--settle", "0.3") == 0
     assert (tmp_path / "again.synthesis").read_bytes() == response.read_bytes()  # same inputs, same bytes
@@ -225,12 +226,26 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     term = float(np.sqrt(np.mean(np.square(removed.offsets - synthesized.offsets)) / np.mean(np.square(synthesized.offsets))))
     assert 0.001 < term < 0.25  # measured 0.06
     import facedyn.processors.remove as remove
+    import facedyn.processors.synthesize as synthesize
 
-    monkeypatch.setattr(remove, "CHUNK_FRAMES", 16)  # streamed in chunks, the response's removal is the whole take's
-    assert cli("remove", root, "-o", take / "quasistatic.chunked.usdc", "--model", response) == 0
+    stiff = tmp_path / "stiff.synthesis"  # the same response on tissue that stiffens with motion
+    fitted.info["calibration"]["hardening"] = 2000.0
+    del fitted.info["calibration"]["expression_inertia_hz"]  # whose longer reach would hide the stiffening's
+    save_model(fitted, stiff)
+    stiffened = {}
+    for command in ("remove", "synthesize"):
+        assert cli(command, root, "-o", take / f"stiff.{command}.usdc", "--model", stiff) == 0
+        stiffened[command] = read_layers([take / f"stiff.{command}.usdc", root]).offsets
+    assert not np.allclose(stiffened["synthesize"], synthesized.offsets, atol=1e-4)  # the stiffening changes it
+    # streamed in chunks, both are the whole take's (the expression term and the stiffening read neighbouring frames)
+    monkeypatch.setattr(remove, "CHUNK_FRAMES", 16)
+    monkeypatch.setattr(synthesize, "CHUNK_FRAMES", 16)
+    for model, whole in ((response, {"remove": removed.offsets, "synthesize": synthesized.offsets}), (stiff, stiffened)):
+        for command in ("remove", "synthesize"):
+            out = take / f"chunked.{command}.{model.stem}.usdc"
+            assert cli(command, root, "-o", out, "--model", model) == 0
+            np.testing.assert_allclose(read_layers([out, root]).offsets, whole[command], atol=1e-5)
     capsys.readouterr()
-    chunked = read_layers([take / "quasistatic.chunked.usdc", root])
-    np.testing.assert_allclose(chunked.offsets, removed.offsets, atol=1e-5)
     before = sorted(p.name for p in tmp_path.rglob("*"))
     for flags in (("--response", "linear"), ("--calibrate", models / "h.synthesis", "--response", "linear", "--quasistatic", models / "f.removal")):
         assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", *flags) == 2
