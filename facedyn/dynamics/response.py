@@ -140,27 +140,30 @@ def _fit(session: list, ridge: float, model: DynamicsModel) -> tuple[np.ndarray,
     rotations = [rows.rotations for rows in session]
     (weights, scale), beta = fit_hardening(
         lambda targets: _solve(features, rotations, targets, ridge),
-        lambda fit: [_centred_load(rows, fit, model) for rows in session],
+        lambda fit: _centred_loads(session, fit, model),
         lambda fit: [(b / fit[1]) @ fit[0] for b in features],
         [rows.targets for rows in session])
     return weights, scale, beta
 
 
-def _centred_load(rows: _TakeRows, fit: tuple, model: DynamicsModel) -> np.ndarray:
-    """(rows, 3S): the take's hardening load under a fit (weights, scale), on its settled
+def _centred_loads(session: list, fit: tuple, model: DynamicsModel) -> list:
+    """[(rows, 3S)]: each take's hardening load under a fit (weights, scale), on its settled
     frames less its mean there, like the targets."""
     weights, scale = fit[:2]
     motion = model.skull_input
     kernel = translation_kernel(weights / scale[:, None], len(model.face.landmarks), motion.past, motion.future)
-    dynamics = ((rows.all_features / scale) @ weights).reshape(len(rows.all_features), -1, 3)
-    load = hardening_load(kernel, dynamics, motion.future)[rows.keep].reshape(len(rows.targets), -1)
-    return load - load.mean(axis=0)
+    loads = []
+    for rows in session:
+        dynamics = ((rows.all_features / scale) @ weights).reshape(len(rows.all_features), -1, 3)
+        load = hardening_load(kernel, dynamics, motion.future)[rows.keep].reshape(len(rows.targets), -1)
+        loads.append(load - load.mean(axis=0))
+    return loads
 
 
 def _predict(rows: _TakeRows, fit: tuple, model: DynamicsModel) -> np.ndarray:
     """(rows, 3S): what a fit (weights, scale, beta) predicts of a take's centred targets."""
     weights, scale, beta = fit
-    return (rows.features / scale) @ weights + beta * _centred_load(rows, fit, model)
+    return (rows.features / scale) @ weights + beta * _centred_loads([rows], fit, model)[0]
 
 
 def _solve(features: list, rotations: list, targets: list, ridge: float) -> tuple[np.ndarray, np.ndarray]:
@@ -226,12 +229,13 @@ def remove_with_response(points, translate, orient, fps: float, model: DynamicsM
     model.check_compatible(fps=check_fps(fps))
     t, q = check_transforms(translate, orient, len(pts))
     b = model.skull_input.features(t, q, model.face.landmarks, fps)
-    d = skull_driven_dynamics(model, b, device)
-    skull_points = skull_space(pts, t, q, space)
     lowpass = model.info["calibration"].get("expression_inertia_hz")
+    kernel = _kernel(model) if lowpass is not None or _hardening(model) else None
+    d = _skull_driven(model, b, device, kernel)
+    skull_points = skull_space(pts, t, q, space)
     if lowpass is not None:  # files fitted before the term remove with the skull alone, as they did
         skin, _ = replace_spikes(skull_points[:, model.face.samples])
-        d = d + expression_inertia(_kernel(model), skin - d, fps, model.skull_input.future, lowpass).astype(np.float32)
+        d = d + expression_inertia(kernel, skin - d, fps, model.skull_input.future, lowpass).astype(np.float32)
     offsets = np.empty((len(pts), pts.shape[1], 3), np.float32)
     model.propagator().apply_into(np.ascontiguousarray(d, dtype=np.float32), offsets)
     return skull_points.astype(np.float32) - offsets, offsets
@@ -241,11 +245,23 @@ def skull_driven_dynamics(model: DynamicsModel, skull_features: np.ndarray, devi
     """(frames, S, 3) float32: the samples' offsets a linear response predicts from a take's
     skull features (every frame of it, in order: its stiffening reads neighbouring frames).
     Files fitted before the stiffening carry no `hardening` and answer linearly, as they did."""
+    return _skull_driven(model, skull_features, device, _kernel(model) if _hardening(model) else None)
+
+
+def _skull_driven(model: DynamicsModel, skull_features: np.ndarray, device: str, kernel: np.ndarray | None) -> np.ndarray:
+    """`skull_driven_dynamics` with the response's impulse kernel given (None: the model has no stiffening)."""
     d = _respond(model, skull_features, device).reshape(len(skull_features), -1, 3)
-    beta = model.info["calibration"].get("hardening")
-    if not beta:
-        return d
-    return stiffen(_kernel(model), d, model.skull_input.future, beta).astype(np.float32)
+    beta = _hardening(model)
+    return d if not beta else stiffen(kernel, d, model.skull_input.future, beta).astype(np.float32)
+
+
+def _hardening(model: DynamicsModel) -> float:
+    """The response's recorded stiffening beta (0 for files fitted before it); a clear error if
+    the file's value is not a non-negative number."""
+    beta = model.info["calibration"].get("hardening", 0.0)
+    if isinstance(beta, bool) or not isinstance(beta, (int, float)) or not np.isfinite(beta) or beta < 0:
+        raise ValueError(f"the linear response's calibration.hardening must be a non-negative number, got {beta!r}")
+    return float(beta)
 
 
 def _kernel(model: DynamicsModel) -> np.ndarray:

@@ -207,14 +207,14 @@ def synthesize_dynamics(
     t, q = check_transforms(translate, orient, f)
     nb, lengths = model_stretch(model)
     y = np.ascontiguousarray(y, dtype=np.float32)
-    shape = expression_shape(y, model.windows.get("stretch_smoothing", 0))
     b = model.skull_input.features(t, q, model.face.landmarks, fps)
+    # a linear response reads no stretch, and its stiffening reads neighbouring frames
+    response = skull_driven_dynamics(model, b, device) if is_linear_response(model) else None
+    shape = expression_shape(y, model.windows.get("stretch_smoothing", 0)) if response is None else None
     propagator = model.propagator()
     network = model.network.to(resolve_device(device)).eval()
     dev = next(network.parameters()).device
     samples = nb.sample_count
-    # a linear response reads no stretch, and its stiffening reads neighbouring frames
-    response = skull_driven_dynamics(model, b, device) if is_linear_response(model) else None
     offsets = np.empty((f, n, 3), np.float32)
     points = np.empty((f, n, 3), np.float32)
     with torch.inference_mode():

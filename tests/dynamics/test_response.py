@@ -202,3 +202,15 @@ def test_the_response_carries_the_tissue_s_stiffening(rig, template, stiffening,
         assert left(stiffened) < left(linear) - 0.01  # measured 0.554 -> 0.524
     else:
         assert abs(left(stiffened) - left(linear)) < 0.005  # measured 0.282 / 0.283
+
+
+def test_a_damaged_stiffening_record_is_a_clear_error(session, template):
+    import copy
+
+    response = fit_linear_response(template, [as_take(s) for s in session[:3]])
+    damaged = copy.copy(response)
+    for value in ("stiff", -1.0, float("nan")):
+        damaged.info = {**response.info, "calibration": {**response.info["calibration"], "hardening": value}}
+        sim = session[0]
+        with pytest.raises(ValueError, match="calibration.hardening must be a non-negative number"):
+            synthesize_dynamics(sim.quasistatic, sim.skull_translate, sim.skull_orient, FPS, damaged, "numpy")
