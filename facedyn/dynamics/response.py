@@ -18,7 +18,10 @@ fitted together, G unpenalized. G is shared because a platform rocks the head by
 of a degree at its own frequency: a sag fitted to that take alone would take up the
 take's whole response, while across the session the sag is set by the gaits' slow turns.
 The first `settle_s` of every take are left out: the expression settles there and its own
-inertia rings.
+inertia rings. How hard W is penalized is the session's to say: each of RIDGES is fitted
+without each take in turn and the one that leaves the least of the left-out takes' motion
+is kept (`cross_validated_left`; prototype actors 1801 / 1802 / 1804 took 0.03, 0.03 and
+1.0 where every fit before had 0.1).
 
 Tissue stiffens as it moves: a hop rings less than a linear fit on the session's smaller
 motions says. The fit therefore carries one more number, the stiffening beta of a first-order
@@ -41,9 +44,10 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-from typing import Iterable
+from typing import Callable, Iterable
 
 import numpy as np
+import scipy.linalg
 import torch
 
 from facedyn.dynamics.diagnostics import motion_left_beyond_sag
@@ -58,19 +62,23 @@ from facedyn.dynamics.training import TrainingSequence
 from facedyn.geometry import quaternion
 
 SETTLE_S = 0.4  # the simulated sessions ease their expression in over 0.3 s
-RIDGE = 0.1  # penalty per frame on the standardized skull features
+RIDGES = (0.01, 0.03, 0.1, 0.3, 1.0)  # penalties per frame on the standardized skull features, one chosen per session
+RIDGE = 0.1  # the penalty of a session of one take, which has no other take to choose by
 MIN_ROWS = 20  # settled frames a take needs to count
 
 
-def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: float = SETTLE_S, ridge: float = RIDGE) -> DynamicsModel:
+def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: float = SETTLE_S, ridge: float | None = None,
+                        on_candidate: Callable[[], None] | None = None) -> DynamicsModel:
     """A synthesis model with ``model``'s setup whose network is the takes' linear response.
 
     takes: TrainingSequences (or dicts) of one actor, each holding one expression under
-    skull motion (platforms, walks, jumps...), all at the model's frame rate.
+    skull motion (platforms, walks, jumps...), all at the model's frame rate; ridge: the
+    penalty (None: the one of RIDGES the session's cross-validation prefers; RIDGE for one
+    take); on_candidate: called after each penalty tried (progress).
     """
     if model.kind != "synthesis":
         raise ValueError(f"fit_linear_response needs a synthesis model as its template, got a {model.kind!r} model")
-    if not ridge > 0:
+    if ridge is not None and not ridge > 0:
         raise ValueError(f"ridge must be positive, got {ridge}")
     session, described = [], []
     for take in map(TrainingSequence.coerce, takes):
@@ -79,11 +87,22 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
         described.append({"name": take.name, "frames": int(len(take.points)), "rows": int(len(rows.targets))})
     if not described:
         raise ValueError("a linear response needs at least one take")
+    if ridge is None and len(session) > 1:
+        left_by_ridge = {}
+        for candidate in RIDGES:
+            left_by_ridge[candidate] = cross_validated_left(session, candidate, model)
+            if on_candidate is not None:
+                on_candidate()
+        ridge = min(left_by_ridge, key=left_by_ridge.get)
+    else:
+        ridge = RIDGE if ridge is None else float(ridge)
+        left_by_ridge = {ridge: cross_validated_left(session, ridge, model) if len(session) > 1 else None}
+    left = left_by_ridge[ridge]
     weights, scale, beta = _fit(session, ridge, model)
-    left = cross_validated_left(session, ridge, model) if len(described) > 1 else None
     network = _linear_network(model.network.spec, weights, scale)
     record = {"response": "linear", "takes": described, "rows": int(sum(len(rows.targets) for rows in session)), "settle_s": float(settle_s),
-              "ridge": float(ridge), "session_cross_validated_left": None if left is None else round(left, 4),
+              "ridge": ridge, "session_cross_validated_left": None if left is None else round(left, 4),
+              "ridge_candidates": {f"{r:g}": None if v is None else round(v, 4) for r, v in left_by_ridge.items()},
               "expression_inertia_hz": LOWPASS_HZ, "hardening": beta}
     info = {**copy.deepcopy(model.info), "calibration": record, "validation": None}
     return DynamicsModel(kind="synthesis", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
@@ -139,7 +158,7 @@ def _fit(session: list, ridge: float, model: DynamicsModel) -> tuple[np.ndarray,
     features = [rows.features for rows in session]
     rotations = [rows.rotations for rows in session]
     (weights, scale), beta = fit_hardening(
-        lambda targets: _solve(features, rotations, targets, ridge),
+        _solver(features, rotations, ridge),
         lambda fit: _centred_loads(session, fit, model),
         lambda fit: [(b / fit[1]) @ fit[0] for b in features],
         [rows.targets for rows in session])
@@ -166,16 +185,22 @@ def _predict(rows: _TakeRows, fit: tuple, model: DynamicsModel) -> np.ndarray:
     return (rows.features / scale) @ weights + beta * _centred_loads([rows], fit, model)[0]
 
 
-def _solve(features: list, rotations: list, targets: list, ridge: float) -> tuple[np.ndarray, np.ndarray]:
-    """(response weights on the scaled skull features (features, 3S), the features' scale):
-    ridge on the features, the shared sag on the rotation entries unpenalized."""
+def _solver(features: list, rotations: list, ridge: float) -> Callable[[list], tuple[np.ndarray, np.ndarray]]:
+    """targets -> (response weights on the scaled skull features (features, 3S), the features'
+    scale): ridge on the features, the shared sag on the rotation entries unpenalized. The
+    normal equations are factored once: the stiffening's alternation solves them again for
+    each round's targets."""
     b = np.concatenate(features)
     scale = np.sqrt(np.mean(b * b, axis=0))
     scale = np.where(scale > 1e-12, scale, 1.0)
     design = np.concatenate([b / scale, np.concatenate(rotations)], axis=1)
     penalty = np.concatenate([np.full(b.shape[1], ridge * len(b)), np.full(9, 1e-9 * len(b))])
-    solution = np.linalg.solve(design.T @ design + np.diag(penalty), design.T @ np.concatenate(targets))
-    return solution[: b.shape[1]], scale
+    factor = scipy.linalg.cho_factor(design.T @ design + np.diag(penalty))
+
+    def solve(targets: list) -> tuple[np.ndarray, np.ndarray]:
+        return scipy.linalg.cho_solve(factor, design.T @ np.concatenate(targets))[: b.shape[1]], scale
+
+    return solve
 
 
 def calibration_names(model: DynamicsModel) -> dict[str, int]:

@@ -87,7 +87,7 @@ class TrainSynthesisProcessor(Processor):
 
     def run(self, plan: Plan, progress: Progress) -> FileOutput:
         from facedyn.dynamics.modelfile import save_model
-        from facedyn.dynamics.response import fit_linear_response
+        from facedyn.dynamics.response import RIDGES, fit_linear_response
         from facedyn.dynamics.skull_motion import NAMED
         from facedyn.dynamics.synthesis import calibrate_synthesis, synthesis_config, train_synthesis
         from facedyn.dynamics.training import TrainingSequence
@@ -98,9 +98,9 @@ class TrainSynthesisProcessor(Processor):
                                   device=params["device"], skull_motion=NAMED[params["skull_features"]])
         sequences = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
         if params["response"] == "linear":
-            progress.start(f"fit the linear response ({len(takes)} takes)", 1)
-            model = fit_linear_response(calibrated, sequences, settle_s=params["settle"])
-            progress.advance()
+            penalties = len(RIDGES) if len(takes) > 1 else 1  # one take has no other to cross-validate on
+            progress.start(f"fit the linear response ({len(takes)} takes, {penalties} ridge penalties)", penalties)
+            model = fit_linear_response(calibrated, sequences, settle_s=params["settle"], on_candidate=progress.advance)
             last = None
         elif calibrated is None:
             on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
@@ -116,6 +116,7 @@ class TrainSynthesisProcessor(Processor):
                    "response": params["response"]}
         if params["response"] == "linear":
             summary["session_cross_validated_left"] = record["session_cross_validated_left"]
+            summary["ridge"] = record["ridge"]
             summary["hardening"] = record["hardening"]
         return FileOutput(partial(save_model, model), summary)
 

@@ -5,7 +5,7 @@ import pytest
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import DynamicsModel, load_model, save_model
 from facedyn.dynamics.network import Network, removal_spec
-from facedyn.dynamics.response import fit_linear_response
+from facedyn.dynamics.response import RIDGE, RIDGES, fit_linear_response
 from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
 from facedyn.dynamics.training import TrainingSequence
 from facedyn.sim.corpus import TakeSpec, simulate_take
@@ -40,6 +40,12 @@ def template(rig, session):
     return train_synthesis(takes, face, rig.uvs, truth, synthesis_config(epochs=1, validation=()), backend="numpy")
 
 
+@pytest.fixture(scope="module")
+def response(session, template):
+    """The actor's response fitted on its session, the ridge chosen by the session."""
+    return fit_linear_response(template, [as_take(s) for s in session])
+
+
 def as_take(sim):
     return TrainingSequence(sim.spec.name, sim.captured, FPS, sim.skull_translate, sim.skull_orient)
 
@@ -48,11 +54,10 @@ def rms(values) -> float:
     return float(np.sqrt(np.mean(np.square(values, dtype=np.float64))))
 
 
-def test_held_expressions_give_the_response_that_the_true_dynamics_give(rig, session, template):
+def test_held_expressions_give_the_response_that_the_true_dynamics_give(rig, session, template, response):
     """Without truth (each take's held shape and its sag that turns with the head projected
     out), the fit predicts a new motion with a changing expression as well as the same fit on
     the true dynamics, and far better than nothing."""
-    response = fit_linear_response(template, [as_take(s) for s in session])
     on_truth = fit_linear_response(template, [TrainingSequence(s.spec.name, s.quasistatic[0] + s.offsets, FPS, s.skull_translate, s.skull_orient)
                                               for s in session])
     new = simulate_take(rig, TakeSpec("speech_run", "run", duration_s=2.0, seed=777, speech=True, tissue=TISSUE))
@@ -68,6 +73,25 @@ def test_held_expressions_give_the_response_that_the_true_dynamics_give(rig, ses
     left = response.info["calibration"]["session_cross_validated_left"]
     print(f"the session's motion left by the response fitted without each take: {left:.3f}")
     assert 0 < left < 0.7  # measured 0.48: 3 s takes, each motion seen once
+
+
+def test_the_session_chooses_how_hard_the_response_is_penalized(session, template, response):
+    """Each candidate ridge is cross-validated on the session and the one leaving the least of
+    the left-out takes' motion is kept: a session tracked with far more noise asks for a
+    harder penalty than the clean one; a ridge given is used as given."""
+    record = response.info["calibration"]
+    assert sorted(map(float, record["ridge_candidates"])) == sorted(RIDGES)
+    assert record["session_cross_validated_left"] == min(record["ridge_candidates"].values())
+    rng = np.random.default_rng(5)
+    noisy = [TrainingSequence(s.spec.name, s.captured + rng.normal(0, 0.1, s.captured.shape).astype(np.float32), FPS,
+                              s.skull_translate, s.skull_orient) for s in session]
+    harder = fit_linear_response(template, noisy).info["calibration"]
+    print(f"\nridge chosen: {record['ridge']} clean, {harder['ridge']} with 1 mm of tracking noise ({harder['ridge_candidates']})")
+    assert harder["ridge"] > record["ridge"]
+    given = fit_linear_response(template, [as_take(s) for s in session[:3]], ridge=0.5).info["calibration"]
+    assert given["ridge"] == 0.5 and list(given["ridge_candidates"]) == ["0.5"]
+    with pytest.raises(ValueError, match="ridge must be positive"):
+        fit_linear_response(template, [as_take(session[0])], ridge=0.0)
 
 
 def test_motion_left_beyond_sag_is_what_a_removal_leaves_of_held_takes(session):
@@ -89,8 +113,7 @@ def test_motion_left_beyond_sag_is_what_a_removal_leaves_of_held_takes(session):
     assert left([0.5 * o for o in offsets]) == pytest.approx(0.5, abs=0.02)
 
 
-def test_the_response_is_zero_at_rest_and_survives_the_model_file(rig, session, template, tmp_path):
-    response = fit_linear_response(template, [as_take(s) for s in session])
+def test_the_response_is_zero_at_rest_and_survives_the_model_file(rig, session, template, response, tmp_path):
     path = tmp_path / "actor.synthesis"
     save_model(response, path)
     loaded = load_model(path)
@@ -119,14 +142,13 @@ def test_refusals_name_the_problem(session, template):
         fit_linear_response(template, [])
 
 
-def test_the_translation_kernel_is_the_response_to_an_acceleration_impulse(rig, session, template):
+def test_the_translation_kernel_is_the_response_to_an_acceleration_impulse(rig, session, template, response):
     """translation_kernel reads, from the response's weights, what synthesis gives for a skull
     that takes one unit acceleration impulse along each axis: the load a moving expression
     puts on its own tissue."""
     from facedyn.dynamics.expression_inertia import translation_kernel
     from facedyn.dynamics.response import _raw_weights
 
-    response = fit_linear_response(template, [as_take(s) for s in session])
     past, future = response.skull_input.past, response.skull_input.future
     kernel = translation_kernel(_raw_weights(response), len(response.face.landmarks), past, future)
     frames, impulse = 3 * (past + future + 1), past + future + 1
@@ -141,7 +163,7 @@ def test_the_translation_kernel_is_the_response_to_an_acceleration_impulse(rig, 
         assert np.abs(offsets[impulse + past + 1:]).max() < 1e-6 * np.abs(expected).max()
 
 
-def test_the_response_removes_the_expression_s_own_inertia(rig, session, template):
+def test_the_response_removes_the_expression_s_own_inertia(rig, session, template, response):
     """Tissue loaded by its own expression's acceleration (facedyn.sim.tissue with
     expression_inertia 1; the session holds its expressions, so the fit never saw that load):
     with the head still the response's skull term removes nothing and its expression term
@@ -152,7 +174,6 @@ def test_the_response_removes_the_expression_s_own_inertia(rig, session, templat
 
     from facedyn.dynamics.response import remove_with_response
 
-    response = fit_linear_response(template, [as_take(s) for s in session])
     skull_only = copy.copy(response)
     skull_only.info = copy.deepcopy(response.info)
     del skull_only.info["calibration"]["expression_inertia_hz"]
@@ -191,9 +212,9 @@ def test_the_response_carries_the_tissue_s_stiffening(rig, template, stiffening,
         _, offsets = synthesize_dynamics(hop.quasistatic, hop.skull_translate, hop.skull_orient, FPS, model, "numpy")
         return rms(offsets[settled] - hop.offsets[settled]) / rms(hop.offsets[settled])
 
-    stiffened = fit_linear_response(template, takes)
+    stiffened = fit_linear_response(template, takes, ridge=RIDGE)  # one ridge for both: the stiffening alone compared
     monkeypatch.setattr(hardening, "ROUNDS", 0)
-    linear = fit_linear_response(template, takes)
+    linear = fit_linear_response(template, takes, ridge=RIDGE)
     beta = stiffened.info["calibration"]["hardening"]
     print(f"\nnonlinearity {stiffening}: hop left {left(linear):.3f} linear, {left(stiffened):.3f} with the stiffening (beta {beta:.0f})")
     assert linear.info["calibration"]["hardening"] == 0.0
@@ -207,7 +228,7 @@ def test_the_response_carries_the_tissue_s_stiffening(rig, template, stiffening,
 def test_a_damaged_stiffening_record_is_a_clear_error(session, template):
     import copy
 
-    response = fit_linear_response(template, [as_take(s) for s in session[:3]])
+    response = fit_linear_response(template, [as_take(s) for s in session[:3]], ridge=RIDGE)
     damaged = copy.copy(response)
     for value in ("stiff", -1.0, float("nan")):
         damaged.info = {**response.info, "calibration": {**response.info["calibration"], "hardening": value}}
