@@ -42,6 +42,9 @@ class TrainSynthesisProcessor(Processor):
                   metavar="MODEL"),
         Parameter("response", str, "network", "what --calibrate fits: H's network trained on (through --quasistatic), or the "
                   "actor's linear response to the skull in closed form, on takes that each hold one expression", ("network", "linear")),
+        Parameter("ridge", float, None, "--response linear: the penalty on the response (default: the one of 0.01, 0.03, 0.1, 0.3 "
+                  "and 1 that the session's takes, each left out in turn, prefer; 0.1 for one take)", above=0.0, maximum=1e6,
+                  metavar="PENALTY"),
         Parameter("settle", float, 0.4, "--response linear: seconds left out at each take's start, where the expression settles",
                   minimum=0.0, maximum=60.0, metavar="SECONDS"),
         Parameter("epochs", int, None, "training epochs (default: the paper's 30; 100 when calibrating)", minimum=1, maximum=100000),
@@ -98,9 +101,10 @@ class TrainSynthesisProcessor(Processor):
                                   device=params["device"], skull_motion=NAMED[params["skull_features"]])
         sequences = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
         if params["response"] == "linear":
-            penalties = len(RIDGES) if len(takes) > 1 else 1  # one take has no other to cross-validate on
+            penalties = len(RIDGES) if len(takes) > 1 and params["ridge"] is None else 1  # one take has no other to cross-validate on
             progress.start(f"fit the linear response ({len(takes)} takes, {penalties} ridge penalties)", penalties)
-            model = fit_linear_response(calibrated, sequences, settle_s=params["settle"], on_candidate=progress.advance)
+            model = fit_linear_response(calibrated, sequences, settle_s=params["settle"], ridge=params["ridge"],
+                                         on_candidate=progress.advance)
             last = None
         elif calibrated is None:
             on_epoch, last = epoch_reporter(progress, f"train H ({len(takes)} takes)", config.epochs)
@@ -131,6 +135,8 @@ def check_sources(params: dict) -> None:
             raise UsageError("--response linear fits held expressions without a quasistatic source; leave out --quasistatic")
         if params["epochs"] is not None:
             raise UsageError("--epochs trains a network; --response linear is fitted in closed form")
+    elif params["ridge"] is not None:
+        raise UsageError("--ridge is the linear response's penalty; give it with --response linear")
     elif params["quasistatic"] is None:
         raise UsageError("--quasistatic MODEL|truth is required: what gives the takes' quasistatic shapes")
 

@@ -204,12 +204,21 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     report = json.loads(capsys.readouterr().out)
     assert report["summary"]["response"] == "linear" and 0 < report["summary"]["session_cross_validated_left"] < 2
     assert report["summary"]["hardening"] == 0.0  # springs that stiffen with the expression only: no stiffening with motion
-    assert cli("train-synthesis", *session, "-o", tmp_path / "again.synthesis", "--calibrate", models / "h.synthesis", "--response", "linear",
-               "--skull", "truth", "--settle", "0.3") == 0
-    assert (tmp_path / "again.synthesis").read_bytes() == response.read_bytes()  # same inputs, same bytes
-    (tmp_path / "again.synthesis").unlink()
-    capsys.readouterr()
+    chosen = report["summary"]["ridge"]
     family, fitted = load_model(models / "h.synthesis"), load_model(response)
+    candidates = fitted.info["calibration"]["ridge_candidates"]
+    assert set(candidates) == {"0.01", "0.03", "0.1", "0.3", "1"} and candidates[f"{chosen:g}"] == min(candidates.values())
+    for name in ("given", "again"):  # --ridge: the chosen penalty given fits the same response without choosing
+        assert cli("train-synthesis", *session, "-o", tmp_path / f"{name}.synthesis", "--calibrate", models / "h.synthesis", "--response",
+                   "linear", "--skull", "truth", "--settle", "0.3", "--ridge", str(chosen)) == 0
+    assert (tmp_path / "again.synthesis").read_bytes() == (tmp_path / "given.synthesis").read_bytes()  # same inputs, same bytes
+    given = load_model(tmp_path / "given.synthesis")
+    assert given.info["calibration"]["ridge_candidates"] == {f"{chosen:g}": candidates[f"{chosen:g}"]}
+    for ours, theirs in zip(given.network.state_dict().values(), fitted.network.state_dict().values()):
+        assert torch.equal(ours, theirs)
+    for name in ("given", "again"):
+        (tmp_path / f"{name}.synthesis").unlink()
+    capsys.readouterr()
     assert np.array_equal(fitted.face.samples, family.face.samples) and fitted.skull_input == family.skull_input
     assert fitted.info["calibration"]["settle_s"] == 0.3 and fitted.info["training"] == family.info["training"]
     take = tmp_path / "take"
@@ -253,12 +262,16 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", "--calibrate", models / "h.synthesis",
                "--response", "linear", "--epochs", "3") == 2
     assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", "--calibrate", models / "h.synthesis",
+               "--response", "linear", "--ridge", "0") == 2
+    assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", "--quasistatic", "truth", "--ridge", "0.1") == 2
+    assert cli("train-synthesis", *session, "-o", tmp_path / "bad.synthesis", "--skull", "truth", "--calibrate", models / "h.synthesis",
                "--response", "linear", "--settle", "0.95") == 1  # 1 s takes: nothing settled is left
     assert cli("remove", root, "-o", take / "bad.usdc", "--model", models / "h.synthesis") != 0
     errors = capsys.readouterr().err
     assert "--response linear needs --calibrate" in errors and "leave out --quasistatic" in errors and "--quasistatic MODEL|truth is required" in errors
     assert "a synthesis model (network H), which reads the quasistatic shape" in errors and "Traceback" not in errors
     assert "--epochs trains a network" in errors and "after --settle 0.95 s" in errors and "internal error" not in errors
+    assert "--ridge: " in errors and "--ridge is the linear response's penalty; give it with --response linear" in errors
     assert sorted(p.name for p in tmp_path.rglob("*")) == before
 
 
@@ -279,7 +292,7 @@ def test_a_linear_response_is_scored_left_out_on_its_session_and_blends_with_f(c
         root = tmp_path / name / "take.usda"
         assert cli("stabilize", root, "-o", root.parent / "stabilized.usdc", "--attach", root) == 0
         roots.append(root)
-    fit = ("--calibrate", models / "h.synthesis", "--response", "linear", "--settle", "0.3")
+    fit = ("--calibrate", models / "h.synthesis", "--response", "linear", "--settle", "0.3", "--ridge", "0.1")  # one penalty: left out as by hand
     response = tmp_path / "actor.synthesis"
     assert cli("train-synthesis", *roots, "-o", response, *fit) == 0
     assert cli("evaluate", *roots, "--session", "true", "--removal", response, "-o", tmp_path / "left_out") == 0
