@@ -36,6 +36,9 @@ G_CM_S2 = 980.665
 PLATFORM_AMPLITUDE_CM = 0.15
 """The vibrating platform's amplitude: 0.73 g at 11 Hz, about 5 mm peak offsets, as in the paper."""
 
+PLATFORM_AXES = {"side": 0, "up": 1, "forward": 2}
+"""The axes a platform can shake along (x, y, z of the world: y up, the actor facing +z)."""
+
 
 @dataclass(frozen=True)
 class Ramp:
@@ -110,12 +113,14 @@ def hop(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, hop_hz: f
 
 
 def platform(freq_hz: float, amplitude_cm: float, duration_s: float = 4.0, fps: float = 120.0,
-             seed: int = 0, *, ramp: Ramp = Ramp()) -> SkullTrajectory:
-    """Standing on a vertically vibrating platform (the papers' corpus uses 6-11 Hz).
+             seed: int = 0, *, ramp: Ramp = Ramp(), axis: str = "up") -> SkullTrajectory:
+    """Standing on a vibrating platform (the papers' corpus shakes vertically at 6-11 Hz).
 
-    The vertical sinusoid has peak `amplitude_cm`; real platforms and bodies add small
-    horizontal motion (5 % of the amplitude) and rocking (0.3 degrees per cm of amplitude)
-    at the same frequency, with phases drawn from `seed`.
+    The sinusoid along `axis` (PLATFORM_AXES) has peak `amplitude_cm`; real platforms and
+    bodies add small motion along the other two axes (5 % of the amplitude) and rocking
+    (0.3 degrees per cm of amplitude) at the same frequency, with phases drawn from `seed`.
+    A session shaken only vertically leaves a response little to learn sideways motion from
+    (README: where the response misses next).
     """
     if not freq_hz > 0:
         raise ValueError(f"platform frequency must be positive, got {freq_hz} Hz")
@@ -123,17 +128,32 @@ def platform(freq_hz: float, amplitude_cm: float, duration_s: float = 4.0, fps: 
         raise ValueError(f"platform amplitude must be >= 0, got {amplitude_cm} cm")
     if not freq_hz < fps / 2:
         raise ValueError(f"a {freq_hz} Hz platform needs fps above {2 * freq_hz}, got {fps}")
+    if axis not in PLATFORM_AXES:
+        raise ValueError(f"a platform shakes along one of {', '.join(PLATFORM_AXES)}, got {axis!r}")
     times = _times(duration_s, fps)
     rng = np.random.default_rng(seed)
     envelope = ramp.envelope(times, duration_s)
     angle = 2 * np.pi * freq_hz * times
     phases = rng.uniform(0.0, 2 * np.pi, 5)
-    translate = amplitude_cm * envelope[:, None] * np.stack(
-        [0.05 * np.sin(angle + phases[0]), np.sin(angle + phases[1]), 0.05 * np.sin(angle + phases[2])], axis=1
-    )
+    shares = np.full(3, 0.05)
+    shares[PLATFORM_AXES[axis]] = 1.0
+    translate = amplitude_cm * envelope[:, None] * np.stack([shares[k] * np.sin(angle + phases[k]) for k in range(3)], axis=1)
     rock = np.radians(0.3) * amplitude_cm * envelope
     orient = _yaw_pitch_roll(np.zeros_like(times), rock * np.sin(angle + phases[3]), rock * np.sin(angle + phases[4]))
     return SkullTrajectory(translate, orient, fps)
+
+
+def parse_platform(text: str) -> tuple[float, str]:
+    """(frequency in Hz, axis) of a platform motion's argument: '9', '9hz' or '4hz:side'."""
+    frequency, _, axis = text.partition(":")
+    try:
+        hz = float(frequency.strip().lower().removesuffix("hz"))
+    except ValueError:
+        raise ValueError(f"platform motion needs a frequency, e.g. platform:9hz or platform:4hz:side, got {text!r}") from None
+    axis = axis.strip().lower() or "up"
+    if axis not in PLATFORM_AXES:
+        raise ValueError(f"a platform shakes along one of {', '.join(PLATFORM_AXES)}, got {axis!r} in {text!r}")
+    return hz, axis
 
 
 def still(duration_s: float = 4.0, fps: float = 120.0, seed: int = 0, *, sway_cm: float = 0.0) -> SkullTrajectory:

@@ -99,6 +99,24 @@ def test_platform_frequency_is_detected(freq_hz):
     assert peak == pytest.approx(0.3 * (2 * np.pi * freq_hz) ** 2 / G, rel=0.1)
 
 
+@pytest.mark.parametrize("axis", ["side", "forward"])
+def test_a_platform_shakes_along_the_axis_it_is_given(axis):
+    """A horizontal platform carries the same sinusoid along its axis; vertical stays the default, unchanged."""
+    index = motion.PLATFORM_AXES[axis]
+    trajectory = motion.platform(7.0, 0.4, duration_s=4.0, fps=120.0, seed=1, axis=axis)
+    assert _dominant_hz(trajectory.translate[:, index], 120.0) == pytest.approx(7.0, abs=0.25)
+    assert np.ptp(trajectory.translate[:, index]) == pytest.approx(0.8, rel=0.02)
+    assert np.abs(np.delete(trajectory.translate, index, axis=1)).max() < 0.1 * 0.4
+    default, up = (motion.platform(7.0, 0.4, duration_s=1.0, seed=3, **kw) for kw in ({}, {"axis": "up"}))
+    assert np.array_equal(default.translate, up.translate) and np.array_equal(default.orient, up.orient)
+    assert motion.parse_platform("4hz:Side") == (4.0, "side") and motion.parse_platform("9") == (9.0, "up")
+    for bad, message in (("4hz:down", "one of side, up, forward"), ("fast", "needs a frequency")):
+        with pytest.raises(ValueError, match=message):
+            motion.parse_platform(bad)
+    with pytest.raises(ValueError, match="one of side, up, forward"):
+        motion.platform(7.0, 0.4, axis="diagonal")
+
+
 @pytest.mark.parametrize(
     "freq_hz, amplitude_cm, fps, message",
     [(0.0, 0.3, 120, "frequency must be positive"), (-6.0, 0.3, 120, "frequency must be positive"),

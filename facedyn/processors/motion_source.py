@@ -21,8 +21,9 @@ def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head",
     """(translate (F,3), orient (F,4), description) of `source` at fps over frame_count frames.
 
     source: a BVH file, a take (.usda/.usdc with a solved skull), or walk | run | hop |
-    still | platform:9hz. bvh: a BVH's `units` (cm per unit), `up` and `forward` axes
-    where the file cannot tell (None: read from the file).
+    still | platform:9hz (platform:4hz:side or :forward shakes horizontally). bvh: a BVH's
+    `units` (cm per unit), `up` and `forward` axes where the file cannot tell (None: read
+    from the file).
     """
     duration = frame_count / fps
     kind, _, arg = source.partition(":")
@@ -31,16 +32,16 @@ def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head",
         return _fit(trajectory, frame_count, source)
     if kind == "platform":
         try:
-            hz = float(arg.lower().removesuffix("hz"))
-        except ValueError:
-            raise UsageError(f"--skull-motion: platform motion needs a frequency, e.g. platform:9hz, got {source!r}") from None
+            hz, axis = motion.parse_platform(arg)
+        except ValueError as error:
+            raise UsageError(f"--skull-motion: {error}") from None
         if not 0 < hz <= MAX_PLATFORM_HZ:  # NaN fails too
             raise UsageError(f"--skull-motion: a platform frequency must lie in (0, {MAX_PLATFORM_HZ:g}] Hz, got {source!r}")
-        trajectory = motion.platform(hz, motion.PLATFORM_AMPLITUDE_CM, duration_s=duration, fps=fps, seed=seed)
+        trajectory = motion.platform(hz, motion.PLATFORM_AMPLITUDE_CM, duration_s=duration, fps=fps, seed=seed, axis=axis)
         return _fit(trajectory, frame_count, source)
     path = Path(source)
     if not path.exists():
-        raise UsageError(f"skull motion {source!r}: not a file, nor one of {', '.join(PROCEDURAL)}, platform:HZ")
+        raise UsageError(f"skull motion {source!r}: not a file, nor one of {', '.join(PROCEDURAL)}, platform:HZ[:side|forward]")
     if not path.suffix.lower().startswith(".usd"):  # anything but USD is read as mocap, which names what is wrong
         trajectory = motion.from_bvh(path, joint, **(bvh or {}))
         if trajectory.fps != fps:

@@ -67,7 +67,7 @@ class TakeSpec:
     """What to simulate: an expression source under a skull motion."""
 
     name: str
-    motion: str  # still | walk | run | hop | dance | turn | jump | platform:HZ | bvh:PATH[#JOINT]
+    motion: str  # still | walk | run | hop | dance | turn | jump | platform:HZ[:side|up|forward] | bvh:PATH[#JOINT]
     expression: str | None = None  # a HELD_EXPRESSIONS key, None = neutral
     dialog: str | None = None  # a Live Link Face CSV driving the expression instead
     speech: bool = False  # a procedural talking face drawn from `seed` instead (facedyn.sim.speech)
@@ -111,10 +111,10 @@ def skull_motion(spec: TakeSpec) -> motion.SkullTrajectory:
         return getattr(motion, kind)(**common, impacts=spec.impacts)
     if kind == "platform":
         try:
-            hz = float(arg.lower().removesuffix("hz"))
-        except ValueError:
-            raise ValueError(f"take {spec.name}: platform motion needs a frequency, e.g. platform:9, got {spec.motion!r}") from None
-        return motion.platform(hz, spec.platform_amplitude_cm, **common)
+            hz, axis = motion.parse_platform(arg)
+        except ValueError as error:
+            raise ValueError(f"take {spec.name}: {error}") from None
+        return motion.platform(hz, spec.platform_amplitude_cm, **common, axis=axis)
     if kind == "bvh":
         path, _, joint = arg.partition("#")
         return motion.from_bvh(path, joint or "Head", duration_s=spec.duration_s, fps=spec.fps, seed=spec.seed)

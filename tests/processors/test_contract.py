@@ -1,4 +1,5 @@
 """The processor contract: declarations drive the CLI, and every bad option is a usage error naming its flag."""
+import numpy as np
 import pytest
 
 from facedyn.cli import main
@@ -69,12 +70,20 @@ def test_bad_options_are_usage_errors_naming_the_flag(argv, flag, capsys, tmp_pa
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("motion", ["platform:0hz", "platform:-5hz", "platform:nanhz", "platform:1e9hz"])
+@pytest.mark.parametrize("motion", ["platform:0hz", "platform:-5hz", "platform:nanhz", "platform:1e9hz", "platform:4hz:down", "platform:hz:side"])
 def test_bad_platform_frequencies_are_usage_errors(motion):
     from facedyn.processors.motion_source import skull_motion
 
     with pytest.raises(UsageError, match="--skull-motion"):
         skull_motion(motion, 120.0, 10)
+
+
+def test_a_platform_source_shakes_along_the_axis_named():
+    from facedyn.processors.motion_source import skull_motion
+
+    for source, axis in (("platform:4hz:side", 0), ("platform:4hz:forward", 2), ("platform:4hz", 1), ("platform:4hz:up", 1)):
+        translate, _, description = skull_motion(source, 120.0, 240)
+        assert np.argmax(np.ptp(translate, axis=0)) == axis and description == source
 
 
 def test_parameter_declarations_check_values():
