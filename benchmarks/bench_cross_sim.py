@@ -93,6 +93,7 @@ from facedyn.dynamics.synthesis import synthesize_dynamics
 from facedyn.dynamics.targets import dynamic_offsets
 from facedyn.evaluation import residual_fraction
 from facedyn.geometry import quaternion
+from facedyn.motion import PLATFORM_AMPLITUDE_CM
 from facedyn.sim.corpus import SPEECH, TakeSpec, simulate_take, simulate_takes
 from facedyn.sim.default_face import default_face
 from facedyn.sim import volumetric
@@ -122,6 +123,12 @@ CALIBRATION = (  # (take, motion, held expression) of each test actor's calibrat
     ("cal_funnel_platform11hz", "platform:11", "funnel"), ("cal_pucker_walk", "walk", "pucker"),
     ("cal_frown_jump", "jump", "frown"), ("cal_smile_dance", "dance", "smile"), ("cal_jaw_turn", "turn", "jaw_open"),
 )
+
+
+HORIZONTAL = {  # --horizontal-platforms: two of the session's platforms shaken horizontally instead (take, motion, amplitude cm)
+    "cal_smile_platform6hz": ("cal_smile_side4hz", "platform:4:side", 1.0),  # 0.64 g
+    "cal_jaw_platform10hz": ("cal_jaw_forward7hz", "platform:7:forward", 0.4),  # 0.79 g
+}
 
 
 def emit(**fields) -> None:
@@ -195,8 +202,7 @@ def choose_removal(roots: dict[str, Path], candidates: dict[str, Path], folder: 
     """The candidate F that leaves the actor's held expressions most alike across motions, no
     truth: `usdfacedyn evaluate --held-expression --removal F` on each pair of calibration
     takes holding one expression; (its name, every candidate's mean spread ratio)."""
-    pairs = [[roots[label] for label, _, expression in CALIBRATION if expression == shared and label in roots]
-             for shared in ("smile", "jaw_open")]
+    pairs = [[root for label, root in roots.items() if expression_of(label) == shared] for shared in ("smile", "jaw_open")]
     pairs = [pair for pair in pairs if len(pair) == 2]
     ratios = {}
     for name, model in candidates.items():
@@ -274,11 +280,23 @@ class TestTake:
         return read_layers([layer, self.root])
 
 
-def calibration_specs(seconds: float, seed: int) -> dict[str, TakeSpec]:
+def calibration_specs(seconds: float, seed: int, horizontal: bool = False) -> dict[str, TakeSpec]:
     """An actor's calibration session: held expressions under motions none of the test takes
-    use (platforms but not 8 Hz, a procedural walk, jump, dance and turn; no run, no hop)."""
-    return {name: TakeSpec(name, motion, expression, duration_s=seconds, seed=seed + 100 + k, impacts=True)
-            for k, (name, motion, expression) in enumerate(CALIBRATION)}
+    use (platforms but not 8 Hz, a procedural walk, jump, dance and turn; no run, no hop);
+    horizontal: two platforms shaken sideways and fore and aft instead (HORIZONTAL)."""
+    specs = {}
+    for k, (name, motion, expression) in enumerate(CALIBRATION):
+        amplitude = PLATFORM_AMPLITUDE_CM
+        if horizontal and name in HORIZONTAL:
+            name, motion, amplitude = HORIZONTAL[name]
+        specs[name] = TakeSpec(name, motion, expression, duration_s=seconds, seed=seed + 100 + k, impacts=True, platform_amplitude_cm=amplitude)
+    return specs
+
+
+def expression_of(label: str) -> str:
+    """The held expression of a calibration take, by its label (either session)."""
+    original = {new: old for old, (new, _, _) in HORIZONTAL.items()}.get(label, label)
+    return next(expression for name, _, expression in CALIBRATION if name == original)
 
 
 def session_models(roots: dict[str, Path], folder: Path, work: Path) -> dict[str, Path]:
@@ -403,7 +421,7 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
          damping_ratio=round(params.damping_ratio, 3), thickness_cm=round(params.thickness_cm, 2), nonlinearity=round(params.nonlinearity, 2))
     base = (6000 if held_out else 5000) + 10 * k
     specs = test_specs(args.seconds, base)
-    calibration = calibration_specs(args.session_seconds, base)
+    calibration = calibration_specs(args.session_seconds, base, args.horizontal_platforms)
     t0 = time.perf_counter()
     sims = simulate_tests(rig, {**specs, **calibration}, params, args.jobs, actor_name, tag)
     simulated = time.perf_counter() - t0
@@ -447,6 +465,8 @@ def main() -> None:
     parser.add_argument("--soft-hz-bands", type=lambda text: [b for b in text.split(",") if b], default=list(SOFT_HZ_BANDS),
                         help="comma-separated synth --soft-hz bands: the recommended F trained once more per band, one of "
                         "them or the family's chosen per actor on its calibration session ('' for none)")
+    parser.add_argument("--horizontal-platforms", action="store_true", help="each actor's session shakes two platforms "
+                        "horizontally instead (6 Hz -> 4 Hz side to side, 1 cm; 10 Hz -> 7 Hz fore and aft, 0.4 cm)")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--work", type=Path, help="keep the corpus, actor and models in this folder and reuse them when there "
                         "(a rerun tests again without training; default: a temporary folder)")
@@ -470,7 +490,8 @@ def main() -> None:
         trained = [t for t in corpus["takes"] if t["name"] not in TEST_SPEECH_TAKES.split(",")]
         emit(case="training", simulator="facedyn.sim.tissue, random TissueParams per take", rig=rig.name,
              takes=len(trained), frames=int(sum(t.get("frames", 0) for t in trained)), f_epochs=args.epochs, f_subsample=args.subsample,
-             h_epochs=args.h_epochs, seconds=seconds, soft_hz_bands=args.soft_hz_bands, band_seconds=band_seconds or "reused", budget="every F variant: the same epochs and subsample fraction; the paper's F without the talking takes")
+             h_epochs=args.h_epochs, seconds=seconds, soft_hz_bands=args.soft_hz_bands, band_seconds=band_seconds or "reused", budget="every F variant: the same epochs and subsample fraction; the paper's F without the talking takes",
+             session="two platforms shaken horizontally (--horizontal-platforms)" if args.horizontal_platforms else "five vertical platforms")
         models = {name: load_model(work / f"{name}.removal") for name in F_VARIANTS}
         h_model = load_model(work / "H.synthesis")
         bands = {name: load_model(path) for name, path in band_paths(work, args).items()} if args.soft_hz_bands else {}
