@@ -101,7 +101,7 @@ class TrainSynthesisProcessor(Processor):
                                   device=params["device"], skull_motion=NAMED[params["skull_features"]])
         sequences = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
         if params["response"] == "linear":
-            penalties = len(RIDGES) if len(takes) > 1 and params["ridge"] is None else 1  # one take has no other to cross-validate on
+            penalties = len(RIDGES) if len(takes) > 1 and params["ridge"] is None else 1  # a given ridge, or one take: one fit
             progress.start(f"fit the linear response ({len(takes)} takes, {penalties} ridge penalties)", penalties)
             model = fit_linear_response(calibrated, sequences, settle_s=params["settle"], ridge=params["ridge"],
                                          on_candidate=progress.advance)
