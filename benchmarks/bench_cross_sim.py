@@ -198,11 +198,11 @@ def train_bands(work: Path, rig_path: Path, args) -> dict:
     return seconds
 
 
-def choose_removal(roots: dict[str, Path], candidates: dict[str, Path], folder: Path) -> tuple[str, dict]:
+def choose_removal(roots: dict[str, Path], session: dict[str, TakeSpec], candidates: dict[str, Path], folder: Path) -> tuple[str, dict]:
     """The candidate F that leaves the actor's held expressions most alike across motions, no
     truth: `usdfacedyn evaluate --held-expression --removal F` on each pair of calibration
     takes holding one expression; (its name, every candidate's mean spread ratio)."""
-    pairs = [[root for label, root in roots.items() if expression_of(label) == shared] for shared in ("smile", "jaw_open")]
+    pairs = [[root for label, root in roots.items() if session[label].expression == shared] for shared in ("smile", "jaw_open")]
     pairs = [pair for pair in pairs if len(pair) == 2]
     ratios = {}
     for name, model in candidates.items():
@@ -291,12 +291,6 @@ def calibration_specs(seconds: float, seed: int, horizontal: bool = False) -> di
             name, motion, amplitude = HORIZONTAL[name]
         specs[name] = TakeSpec(name, motion, expression, duration_s=seconds, seed=seed + 100 + k, impacts=True, platform_amplitude_cm=amplitude)
     return specs
-
-
-def expression_of(label: str) -> str:
-    """The held expression of a calibration take, by its label (either session)."""
-    original = {new: old for old, (new, _, _) in HORIZONTAL.items()}.get(label, label)
-    return next(expression for name, _, expression in CALIBRATION if name == original)
 
 
 def session_models(roots: dict[str, Path], folder: Path, work: Path) -> dict[str, Path]:
@@ -431,7 +425,7 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
              for label in calibration if label in sims}
     calibrated = session_models(roots, tests / "calibration", work)
     calibrating = time.perf_counter() - t0
-    chosen, ratios = choose_removal(roots, band_paths(work, args), tests / "calibration") if bands else (None, {})
+    chosen, ratios = choose_removal(roots, calibration, band_paths(work, args), tests / "calibration") if bands else (None, {})
     if bands:
         emit(case="tissue band chosen on the calibration session", actor=actor_name, **tag, chosen=chosen, held_expression_spread_ratio=ratios)
     response = load_model(calibrated["linear_response"])
