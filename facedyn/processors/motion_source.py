@@ -41,7 +41,7 @@ def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head",
         return _fit(trajectory, frame_count, source)
     path = Path(source)
     if not path.exists():
-        raise UsageError(f"skull motion {source!r}: not a file, nor one of {', '.join(PROCEDURAL)}, platform:HZ[:side|forward]")
+        raise UsageError(f"skull motion {source!r}: not a file, nor one of {', '.join(PROCEDURAL)}, platform:HZ[:{'|'.join(motion.PLATFORM_AXES)}]")
     if not path.suffix.lower().startswith(".usd"):  # anything but USD is read as mocap, which names what is wrong
         trajectory = motion.from_bvh(path, joint, **(bvh or {}))
         if trajectory.fps != fps:

@@ -34,7 +34,7 @@ class SynthesizeProcessor(Processor):
     writes = Writes("layer", role="synthesized", help="the synthesized layer to write (e.g. synthesized.hop.usdc)")
     parameters = (
         Parameter("model", Path, help="the synthesis model file (from train-synthesis)", metavar="MODEL"),
-        Parameter("skull_motion", str, "", "BVH file, a stabilized take, or walk|run|hop|still|platform:HZ[:side|forward] (default: the take's own)"),
+        Parameter("skull_motion", str, "", "BVH file, a stabilized take, or walk|run|hop|still|platform:HZ[:side|up|forward] (default: the take's own)"),
         Parameter("joint", str, "Head", "BVH joint that carries the skull"),
         *BVH_PARAMETERS,
         Parameter("seed", int, 0, "seed of a procedural motion", minimum=0),
