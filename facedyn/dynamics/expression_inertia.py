@@ -27,8 +27,18 @@ answering it as a load adds a share of it back. Measured, not derived:
   and 12 Hz were tried there, 5 was best or near it on each. The held-out figures are the
   benchmark's (README).
 
-A response file fitted before the term carries no `expression_inertia_hz` and removes with
-the skull alone, as it did. Synthesis does not use the term.
+Synthesis answers the same load on the quasistatic skin it is given, spikes replaced and
+low-passed alike (a quasistatic layer is a capture less its removed dynamics: it keeps the
+tracker's noise and pops). On the prototype actors 1801 / 1802 / 1804 (response fitted on
+the tracker-noisy session, true skull, ridges 0.03 / 0.03 / 1), the hop's synthesis from its
+own true quasistatic skin plus tracker noise went 31.3 / 46.1 / 73.6 % -> 31.1 / 40.8 /
+73.7 %, and the walking dialog's quasistatic skin under the hop's skull (simulated again:
+a retargeting's truth) 50.6 / 44.0 / 53.1 % -> 48.9 / 42.6 / 53.0 %; 8 Hz took more on 1801 and
+1802 but fed the response's own removal leftovers back on 1804 (its hop 73.6 % -> 83 % from
+the quasistatic its removal left, against 67 % at 5 Hz), so synthesis keeps removal's cut-off.
+
+A response file fitted before the term carries no `expression_inertia_hz` and removes and
+synthesizes with the skull alone, as it did.
 """
 from __future__ import annotations
 

@@ -27,8 +27,8 @@ Tissue stiffens as it moves: a hop rings less than a linear fit on the session's
 motions says. The fit therefore carries one more number, the stiffening beta of a first-order
 correction d + beta K * |d|^2 d (facedyn.dynamics.hardening; K the response's own answer to an
 acceleration impulse), fitted with the response by alternation and recorded as `hardening`;
-synthesis and removal both apply it (`skull_driven_dynamics`). Files fitted before it carry
-no `hardening` and answer linearly, as they did.
+synthesis and removal both apply it. Files fitted before it carry no `hardening` and answer
+linearly, as they did.
 
 The result is a synthesis model like H (the template's samples, landmarks, stretch setup and
 skull input), whose network is one linear layer that reads no stretch: what the response
@@ -37,8 +37,10 @@ it predicts zero dynamics. Since it reads the skull alone, it also removes: the 
 minus the dynamics it predicts from the solved skull (`remove_with_response`, `usdfacedyn
 remove --model` of a linear response), plus its answer to the capture's own skin
 acceleration below the tissue's band, the load of a moving expression
-(facedyn.dynamics.expression_inertia; recorded as `expression_inertia_hz`, the cut-off). `benchmarks/bench_cross_sim.py` has what it gives on tissue of
-another simulator family; the README quotes it.
+(facedyn.dynamics.expression_inertia; recorded as `expression_inertia_hz`, the cut-off).
+Synthesis answers the same load on the quasistatic skin it is given (`synthesized_dynamics`).
+`benchmarks/bench_cross_sim.py` has what it gives on tissue of another simulator family; the
+README quotes it.
 """
 from __future__ import annotations
 
@@ -266,15 +268,29 @@ def remove_with_response(points, translate, orient, fps: float, model: DynamicsM
     return skull_points.astype(np.float32) - offsets, offsets
 
 
-def skull_driven_dynamics(model: DynamicsModel, skull_features: np.ndarray, device: str = "cpu") -> np.ndarray:
-    """(frames, S, 3) float32: the samples' offsets a linear response predicts from a take's
-    skull features (every frame of it, in order: its stiffening reads neighbouring frames).
-    Files fitted before the stiffening carry no `hardening` and answer linearly, as they did."""
-    return _skull_driven(model, skull_features, device, _kernel(model) if _hardening(model) else None)
+def synthesized_dynamics(model: DynamicsModel, skull_features: np.ndarray, quasistatic_samples: np.ndarray, fps: float,
+                         device: str = "cpu") -> np.ndarray:
+    """(frames, S, 3) float32: what a linear response synthesizes for a quasistatic skin under
+    a skull motion: the skull-driven dynamics plus its answer to the skin's own acceleration
+    below the recorded cut-off (the expression's inertia, as removal answers it), so that what
+    removal takes out comes back closer when synthesized on the same skull. quasistatic_samples:
+    (frames, S, 3) the skin at the model's samples in skull space, spikes replaced as removal
+    reads the capture (a quasistatic layer keeps the capture's pops). Files fitted before the
+    term synthesize from the skull alone, as they did."""
+    lowpass = model.info["calibration"].get("expression_inertia_hz")
+    kernel = _kernel(model) if lowpass is not None or _hardening(model) else None
+    d = _skull_driven(model, skull_features, device, kernel)
+    if lowpass is None:
+        return d
+    skin, _ = replace_spikes(quasistatic_samples)
+    return d + expression_inertia(kernel, skin, fps, model.skull_input.future, lowpass).astype(np.float32)
 
 
 def _skull_driven(model: DynamicsModel, skull_features: np.ndarray, device: str, kernel: np.ndarray | None) -> np.ndarray:
-    """`skull_driven_dynamics` with the response's impulse kernel given (None: the model has no stiffening)."""
+    """(frames, S, 3) float32: the samples' offsets the response predicts from a take's skull
+    features (every frame of it, in order: its stiffening reads neighbouring frames), with its
+    impulse kernel given (None: the model has no stiffening). Files fitted before the
+    stiffening carry no `hardening` and answer linearly, as they did."""
     d = _respond(model, skull_features, device).reshape(len(skull_features), -1, 3)
     beta = _hardening(model)
     return d if not beta else stiffen(kernel, d, model.skull_input.future, beta).astype(np.float32)

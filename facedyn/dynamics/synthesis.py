@@ -35,7 +35,7 @@ from facedyn.dynamics.features import check_fps
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import SYNTHESIS_HIDDEN, NetworkSpec, resolve_device
 from facedyn.dynamics.removal import remove_dynamics
-from facedyn.dynamics.response import is_linear_response, skull_driven_dynamics
+from facedyn.dynamics.response import is_linear_response, synthesized_dynamics
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
@@ -208,8 +208,8 @@ def synthesize_dynamics(
     nb, lengths = model_stretch(model)
     y = np.ascontiguousarray(y, dtype=np.float32)
     b = model.skull_input.features(t, q, model.face.landmarks, fps)
-    # a linear response reads no stretch, and its stiffening reads neighbouring frames
-    response = skull_driven_dynamics(model, b, device) if is_linear_response(model) else None
+    # a linear response reads no stretch, and its stiffening and expression term read neighbouring frames
+    response = synthesized_dynamics(model, b, y[:, model.face.samples], fps, device) if is_linear_response(model) else None
     shape = expression_shape(y, model.windows.get("stretch_smoothing", 0)) if response is None else None
     propagator = model.propagator()
     network = model.network.to(resolve_device(device)).eval()
