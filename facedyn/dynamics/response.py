@@ -256,13 +256,8 @@ def remove_with_response(points, translate, orient, fps: float, model: DynamicsM
     model.check_compatible(fps=check_fps(fps))
     t, q = check_transforms(translate, orient, len(pts))
     b = model.skull_input.features(t, q, model.face.landmarks, fps)
-    lowpass = model.info["calibration"].get("expression_inertia_hz")
-    kernel = _kernel(model) if lowpass is not None or _hardening(model) else None
-    d = _skull_driven(model, b, device, kernel)
     skull_points = skull_space(pts, t, q, space)
-    if lowpass is not None:  # files fitted before the term remove with the skull alone, as they did
-        skin, _ = replace_spikes(skull_points[:, model.face.samples])
-        d = d + expression_inertia(kernel, skin - d, fps, model.skull_input.future, lowpass).astype(np.float32)
+    d = _dynamics(model, b, skull_points[:, model.face.samples], fps, device, skin_holds_dynamics=True)
     offsets = np.empty((len(pts), pts.shape[1], 3), np.float32)
     model.propagator().apply_into(np.ascontiguousarray(d, dtype=np.float32), offsets)
     return skull_points.astype(np.float32) - offsets, offsets
@@ -277,13 +272,25 @@ def synthesized_dynamics(model: DynamicsModel, skull_features: np.ndarray, quasi
     (frames, S, 3) the skin at the model's samples in skull space, spikes replaced as removal
     reads the capture (a quasistatic layer keeps the capture's pops). Files fitted before the
     term synthesize from the skull alone, as they did."""
+    return _dynamics(model, skull_features, quasistatic_samples, fps, device, skin_holds_dynamics=False)
+
+
+def _dynamics(model: DynamicsModel, skull_features: np.ndarray, skin: np.ndarray, fps: float, device: str, *,
+              skin_holds_dynamics: bool) -> np.ndarray:
+    """(frames, S, 3) float32: the skull-driven dynamics plus the answer to the skin's own
+    acceleration below the recorded cut-off (files fitted before the term: the skull alone).
+    skin: (frames, S, 3) skull-space samples, spikes not yet replaced; skin_holds_dynamics: a
+    capture (removal), whose load is the skin less the skull-driven dynamics, rather than a
+    quasistatic skin (synthesis)."""
     lowpass = model.info["calibration"].get("expression_inertia_hz")
     kernel = _kernel(model) if lowpass is not None or _hardening(model) else None
     d = _skull_driven(model, skull_features, device, kernel)
     if lowpass is None:
         return d
-    skin, _ = replace_spikes(quasistatic_samples)
-    return d + expression_inertia(kernel, skin, fps, model.skull_input.future, lowpass).astype(np.float32)
+    load, _ = replace_spikes(skin)
+    if skin_holds_dynamics:
+        load = load - d
+    return d + expression_inertia(kernel, load, fps, model.skull_input.future, lowpass).astype(np.float32)
 
 
 def _skull_driven(model: DynamicsModel, skull_features: np.ndarray, device: str, kernel: np.ndarray | None) -> np.ndarray:
