@@ -117,7 +117,7 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
     record = {"response": "linear", "takes": described, "rows": int(sum(len(rows.targets) for rows in session)), "settle_s": float(settle_s),
               "ridge": ridge, "session_cross_validated_left": None if left is None else round(left, 4),
               "ridge_candidates": {f"{r:g}": None if v is None else round(v, 4) for r, v in left_by_ridge.items()},
-              "expression_inertia_hz": LOWPASS_HZ, "hardening": beta}
+              "expression_inertia_hz": LOWPASS_HZ, "hardening": beta, "temporal_kernels": TEMPORAL_KERNELS}
     info = {**copy.deepcopy(model.info), "calibration": record, "validation": None}
     return DynamicsModel(kind="synthesis", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
                          arrays=dict(model.arrays), skull_motion=model.skull_input)

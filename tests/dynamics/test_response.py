@@ -82,6 +82,7 @@ def test_the_session_chooses_how_hard_the_response_is_penalized(session, templat
     record = response.info["calibration"]
     assert sorted(map(float, record["ridge_candidates"])) == sorted(RIDGES)
     assert record["session_cross_validated_left"] == min(record["ridge_candidates"].values())
+    assert record["temporal_kernels"] == 4  # the modal form's, recorded with the fit
     rng = np.random.default_rng(5)
     noisy = [TrainingSequence(s.spec.name, s.captured + rng.normal(0, 0.3, s.captured.shape).astype(np.float32), FPS,
                               s.skull_translate, s.skull_orient) for s in session]
