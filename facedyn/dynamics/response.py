@@ -3,8 +3,8 @@
 H trained on a family of simulated tissues predicts the family's average answer to the skull,
 and going on training its network on an actor's session (`calibrate_synthesis`) moves
 hundreds of thousands of weights on a few thousand frames, through targets that F makes.
-A linear response has one weight per skull feature and sample coordinate and is fitted in
-closed form (ridge regression) on the session's own captures, without F and without truth:
+A linear response has a few thousand numbers, fitted by least squares with a ridge on the
+session's own captures, without F and without truth:
 each calibration take holds one expression, so its skin in skull space is
 
     x(t) = m + G r(t) + W b(t) + noise,
@@ -203,8 +203,8 @@ def _solver(features: list, rotations: list, ridge: float, landmarks: int, width
     """targets -> (response weights on the scaled skull features (features, 3S), the features'
     scale) in the modal form (`_modal_fit`): ridge on the spatial maps, the shared sag on the
     rotation entries unpenalized (projected out of the features, which is the same least
-    squares). Everything after the features' Gram matrix is done once: the stiffening's
-    alternation solves again for each round's targets."""
+    squares). The features' Gram matrix and the plain ridge fit's factor are computed once:
+    the stiffening's alternation solves again for each round's targets."""
     b = np.concatenate(features)
     scale = np.sqrt(np.mean(b * b, axis=0))
     scale = np.where(scale > 1e-12, scale, 1.0)

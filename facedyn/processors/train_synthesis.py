@@ -11,7 +11,7 @@ accelerations by default, the paper's velocities with `--skull-features velocity
 many tissues) on one actor's own captures instead, through F as the paper does: the actor's
 tissue answers the skull in its own way, which a family's average does not
 (facedyn.dynamics.synthesis.calibrate_synthesis). `--calibrate MODEL --response linear`
-fits the actor's linear response to the skull in closed form instead, on takes that each
+fits the actor's linear response to the skull by least squares instead, on takes that each
 hold one expression, with neither F nor truth (facedyn.dynamics.response says how); it
 keeps the model's setup and replaces its network.
 """
@@ -41,7 +41,7 @@ class TrainSynthesisProcessor(Processor):
                   "through --quasistatic F) instead of a new one; it keeps its samples, stretch setup and skull input",
                   metavar="MODEL"),
         Parameter("response", str, "network", "what --calibrate fits: H's network trained on (through --quasistatic), or the "
-                  "actor's linear response to the skull in closed form, on takes that each hold one expression", ("network", "linear")),
+                  "actor's linear response to the skull by least squares, on takes that each hold one expression", ("network", "linear")),
         Parameter("ridge", float, None, "--response linear: the penalty on the response (default: the one of 0.01, 0.03, 0.1, 0.3 "
                   "and 1 that the session's takes, each left out in turn, prefer; 0.1 for one take)", above=0.0, maximum=1e6,
                   metavar="PENALTY"),
@@ -134,7 +134,7 @@ def check_sources(params: dict) -> None:
         if params["quasistatic"] is not None:
             raise UsageError("--response linear fits held expressions without a quasistatic source; leave out --quasistatic")
         if params["epochs"] is not None:
-            raise UsageError("--epochs trains a network; --response linear is fitted in closed form")
+            raise UsageError("--epochs trains a network; --response linear is fitted by least squares")
     elif params["ridge"] is not None:
         raise UsageError("--ridge is the linear response's penalty; give it with --response linear")
     elif params["quasistatic"] is None:
