@@ -8,12 +8,16 @@ Prints one JSON object per case:
 - removal: the whole of remove_dynamics (features, network F, propagation, subtraction) on
   1,000 frames, in frames per second, excluding I/O and the one-off propagation build;
 - removal_with_io: the remove processor as `usdfacedyn remove` runs it (read the stabilized
-  take and the model file, remove, write the quasistatic layer), ICT rig only.
+  take and the model file, remove, write the quasistatic layer), ICT rig only;
+- removal_linear_response: the same take removed by an actor's linear response (the skull
+  response in its modal form, its stiffening and expression term), alone and as `remove
+  --blend` runs it (the mean of F's removal and the response's), excluding the one-off fit.
 
 The mesh is the ICT-FaceKit skin (11,248 points, ../shared/data) with its rigid region, or
 where the rig is absent a synthetic curved sheet of 148 x 76 = 11,248 points with a rigid
-top band. The model is randomly initialised: speed does not depend on the weights. Times
-are the best of ``--repeats`` runs after a warm-up run.
+top band. F is randomly initialised: speed does not depend on the weights; the linear response
+is fitted on the benchmark's take itself (its two halves as a session, its ridge chosen there).
+Times are the best of ``--repeats`` runs after a warm-up run.
 
     python benchmarks/bench_remove_speed.py [--frames 1000] [--repeats 3] [--torch-threads N] [--rig PATH|sheet]
 """
@@ -32,13 +36,16 @@ import torch
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.features import compute_features
 from facedyn.dynamics.modelfile import DynamicsModel
-from facedyn.dynamics.network import Network, removal_spec
+from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec, removal_spec
 from facedyn.dynamics.propagate import laplacian_apply
 from facedyn.dynamics.removal import remove_dynamics
+from facedyn.dynamics.response import fit_linear_response, remove_with_response
 from facedyn.dynamics.skull import to_world
+from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.geometry import quaternion
 from facedyn.kernels import runtime
 from facedyn.performance import Topology
+from facedyn.processors.remove import mean_removal
 
 ROWS, COLS, FPS, SAMPLES = 148, 76, 120.0, 344
 ICT_RIG = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"
@@ -103,6 +110,20 @@ def removal_with_io(rig, skull_points, translate, orient, model, repeats: int) -
         processor = registry.load("remove")
         seconds = best_of(lambda: execute(processor, Request([root], output, params={"model": str(model_path)}), Progress.silent()), repeats)
         return {"seconds": seconds, "frames_per_s": frames / seconds, "layer_mb": round(output.stat().st_size / 2**20, 1)}
+
+
+def linear_response(face: FaceSetup, skull_points: np.ndarray, translate: np.ndarray, orient: np.ndarray, template=None):
+    """An actor's linear response fitted on the take's two halves as its session, its ridge
+    chosen there as `train-synthesis --response linear` chooses it; template: a synthesis
+    model of the face (None: a bare one: a response reads only its face and skull input)."""
+    if template is None:
+        motion = SkullMotionInput()
+        spec = NetworkSpec(len(face.landmarks) * motion.width * 3 + 2 * len(face.samples), SYNTHESIS_HIDDEN, 3 * len(face.samples))
+        template = DynamicsModel("synthesis", Network(spec), face, FPS, {"stretch_smoothing": 10}, skull_motion=motion)
+    half = len(skull_points) // 2
+    takes = [dict(name=f"half{k}", points=skull_points[part], fps=FPS, translate=translate[part], orient=orient[part], space="skull")
+             for k, part in enumerate((slice(0, half), slice(half, None)))]
+    return fit_linear_response(template, takes)
 
 
 def best_of(fn, repeats: int) -> float:
@@ -179,6 +200,16 @@ def main() -> None:
               "seconds": seconds, "frames_per_s": args.frames / seconds, "target_frames_per_s": 300,
               "one_off_setup_s": {"rig_samples_and_landmarks": setup_s, "propagation_matrix": build_s},
               "smoothness_residual_median": float(np.median(residual))})
+
+    start = time.perf_counter()
+    response = linear_response(face, skull_points, translate, orient)
+    fit_s = time.perf_counter() - start
+    alone = best_of(lambda: remove_with_response(skull_points, translate, orient, FPS, response, device="cpu"), args.repeats)
+    blended = best_of(lambda: mean_removal([remove_dynamics(skull_points, translate, orient, FPS, model, "auto"),
+                                            remove_with_response(skull_points, translate, orient, FPS, response, device="cpu")]), args.repeats)
+    emit({"case": "removal_linear_response", "mesh": mesh_name, "points": len(points), "samples": SAMPLES, "frames": args.frames,
+          "seconds": alone, "frames_per_s": args.frames / alone, "blend_with_f_seconds": blended, "blend_with_f_frames_per_s": args.frames / blended,
+          "target_frames_per_s": 300, "one_off_fit_s": fit_s, "temporal_kernels": response.info["calibration"]["temporal_kernels"]})
     if rig is not None:
         emit({"case": "removal_with_io", "mesh": mesh_name, "frames": args.frames, **removal_with_io(rig, skull_points, translate, orient, model, args.repeats)})
 

@@ -6,6 +6,9 @@ Prints one JSON object per case:
   stretch backend, excluding I/O and the one-off propagation build; beside it, in the
   same run, remove_dynamics on the same take (the reference: the other per-take pass);
 - synthesize_stages: the time of each of those steps on the same take (NumPy stretch);
+- synthesize_linear_response: synthesize_dynamics with an actor's linear response instead of
+  H (the recommended path: no stretch; the skull response in its modal form, its stiffening
+  and expression term), fitted on the benchmark's skull motion (bench_remove_speed's);
 - train_epoch: one epoch of H's training loop (facedyn.dynamics.training.fit, batches of
   50 frames) on a corpus of ``--corpus-frames`` frames, per corpus size, with one torch
   thread and with torch's default. Only the number of frames and samples matter there,
@@ -26,7 +29,7 @@ import time
 import numpy as np
 import torch
 
-from bench_remove_speed import FPS, SAMPLES, best_of, emit, sheet, take
+from bench_remove_speed import FPS, SAMPLES, best_of, emit, linear_response, sheet, take
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec, removal_spec
@@ -101,6 +104,14 @@ def bench_synthesis(args, backends) -> None:
     }
     emit({"case": "synthesize_stages", "stretch_backend": "numpy", "network_device": str(device), "frames": args.frames, "points": len(points),
           "seconds": {k: round(v, 5) for k, v in stages.items()}})
+
+    skull_points, _, _ = take(points, args.frames)
+    start = time.perf_counter()
+    response = linear_response(face, skull_points, translate, orient, template=model)
+    fit_s = time.perf_counter() - start
+    seconds = best_of(lambda: synthesize_dynamics(quasistatic, translate, orient, FPS, response, device="cpu"), args.repeats)
+    emit({"case": "synthesize_linear_response", "points": len(points), "samples": SAMPLES, "frames": args.frames, "seconds": seconds,
+          "frames_per_s": args.frames / seconds, "target_frames_per_s": 300, "one_off_fit_s": fit_s})
 
 
 def bench_training(args) -> None:
