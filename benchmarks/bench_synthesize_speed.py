@@ -73,7 +73,7 @@ def bench_synthesis(args, backends) -> None:
     propagator = model.propagator()
     build_s = time.perf_counter() - start
     quasistatic = expressions(points, args.frames)
-    _, translate, orient = take(points, args.frames)
+    skull_points, translate, orient = take(points, args.frames)  # the skull motion, and a capture under it for the response
 
     torch.manual_seed(0)
     removal = DynamicsModel("removal", Network(removal_spec()), face, FPS, {"skull": 10, "skin": 10, "target": 10})
@@ -105,7 +105,6 @@ def bench_synthesis(args, backends) -> None:
     emit({"case": "synthesize_stages", "stretch_backend": "numpy", "network_device": str(device), "frames": args.frames, "points": len(points),
           "seconds": {k: round(v, 5) for k, v in stages.items()}})
 
-    skull_points, _, _ = take(points, args.frames)
     start = time.perf_counter()
     response = linear_response(face, skull_points, translate, orient, template=model)
     fit_s = time.perf_counter() - start
