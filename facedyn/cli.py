@@ -148,8 +148,14 @@ def _cmd_inspect(args) -> int:
 def _cmd_layers(args) -> int:
     from facedyn.errors import UsageError
     from facedyn.usd import rootedit
-    from facedyn.usd.stackstatus import format_layers, stack_status
+    from facedyn.usd.stackstatus import check_take_root, format_layers, lists_itself, stack_status
 
+    check_take_root(args.take)
+    itself = lists_itself(args.take)
+    detaching_itself = args.detach is not None and args.take.resolve() in (Path(args.detach).resolve(), (args.take.parent / args.detach).resolve())
+    if itself is not None and not detaching_itself:
+        raise UsageError(f"{args.take}: lists itself among its subLayers ({itself}); take that entry out first: "
+                         f"usdfacedyn layers {args.take} --detach {itself}")
     if (args.above or args.below) and not args.move:
         raise UsageError("--above/--below go with --move LAYER")
     if args.move and bool(args.above) == bool(args.below):

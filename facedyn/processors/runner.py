@@ -98,6 +98,43 @@ def _check_paths(processor: Processor, request: Request) -> None:
         raise UsageError(f"{request.output}: is a file; -o names the folder to write")
     if request.attach is not None and writes != "layer":
         raise UsageError(f"{processor.name} writes a {writes}, which cannot be attached to a take")
+    if processor.reads.what == "take":
+        _check_roots_read(request.inputs)
+        if writes == "layer" and processor.writes.role:
+            _check_fresh_below(request.inputs, processor.writes.role)
+
+
+def _check_fresh_below(inputs: list[Path], role_name: str) -> None:
+    """Refuse to compute over a stale layer: the result would be fresh over a layer that no longer matches the capture."""
+    from facedyn.usd.errors import TakeError
+    from facedyn.usd.layerstack import is_take_root
+    from facedyn.usd.stackstatus import needs_message, open_root, stale_below
+
+    for path in inputs:
+        try:
+            if not path.is_file() or not is_take_root(open_root(path)):
+                continue
+        except TakeError:
+            continue  # an unreadable take is reported by its reader
+        for status in stale_below(path, role_name):
+            why = "it is missing" if status.state == "missing" else (status.reason or needs_message(status))
+            fix = f"re-run `usdfacedyn {status.processor}` on {path} first" if status.processor else f"detach it from {path}"
+            raise TakeError(f"{path}: the layer {status.asset} it would read is {status.state}: {why}. To bring it up to date, {fix}")
+
+
+def _check_roots_read(inputs: list[Path]) -> None:
+    """Refuse a take root that lists itself (USD only warns, and composes the rest as if it did not)."""
+    from facedyn.usd.errors import TakeError
+    from facedyn.usd.stackstatus import lists_itself
+
+    for path in inputs:
+        try:
+            itself = lists_itself(path) if path.is_file() else None
+        except TakeError:
+            continue  # an unreadable take is reported by its reader
+        if itself is not None:
+            raise UsageError(f"{path}: lists itself among its subLayers ({itself}); take that entry out first: "
+                             f"usdfacedyn layers {path} --detach {itself}")
 
 
 LAYER_SUFFIXES = (".usd", ".usda", ".usdc")  # what a take and its layers can be written as (not .usdz packages)

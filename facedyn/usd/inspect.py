@@ -16,7 +16,7 @@ from pxr import Sdf, UsdGeom
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import is_take_root, layer_metadata, recorded_role_name
-from facedyn.usd.stackstatus import LayerStatus, frame_range, stack_status
+from facedyn.usd.stackstatus import LayerStatus, frame_range, needs_message, stack_status
 from facedyn.usd.stage import open_stage
 from facedyn.usd.take import find_face_mesh
 
@@ -90,8 +90,9 @@ def _describe_layer(layer: Sdf.Layer, status: LayerStatus | None) -> dict:
         "parameters": parameters,
         "role": (recorded_role_name(text) or "") if "role" in text or "processor" in text else "",
         "run": text.get("run", ""),
-        "stale": bool(status and status.stale),
-        "staleReason": status.reason if status else "",
+        "stale": bool(status and status.state == "stale"),
+        "staleReason": (status.reason or (needs_message(status) if status.needs else "")) if status else "",
+        "unchecked": status.unchecked if status else "",
         "coversTake": status.covers if status else True,
         "problems": problems + ([problem] if problem else []),
     }
@@ -139,6 +140,8 @@ def format_description(d: dict) -> str:
         lines.append(f"  {i}. {name:<32} {what:<12} {detail.lstrip(', ')}")
         if layer["stale"]:
             lines.append(f"       STALE: {layer['staleReason']}")
+        if layer["unchecked"]:
+            lines.append(f"       unchecked: {layer['unchecked']}")
         if layer["parameters"]:
             lines.append(f"       parameters: {json.dumps(layer['parameters'], sort_keys=True)}")
         lines += [f"       malformed provenance: {problem}" for problem in layer["problems"]]

@@ -2,8 +2,9 @@
 
 Checked before any work, on real paths (symlinks resolved): a run may not write over any
 layer of an input's stack (except the layer its own role replaces), over the root it
-attaches to, or over a file that would then list itself; and the root it attaches to (or an
-import creates) may not be one of the data files it reads.
+attaches to, or over a file that would then list itself; the root it attaches to (or an
+import creates) may not be one of the data files it reads; and a layer is attached only to
+the root it was read from (its provenance names that root's layers).
 """
 from __future__ import annotations
 
@@ -82,6 +83,10 @@ def check_output_paths(
                         "Give a take root (.usda) instead"
                     )
         _check_not_layer_of(output, out, str(target), stack_files(target_path)[1:], role)
+    if attach is not None and inputs and Path(attach).resolve() not in {Path(i).resolve() for i in inputs}:
+        read = ", ".join(str(i) for i in inputs)
+        raise UsageError(f"--attach {attach}: a layer goes only into the root whose layers it was computed from ({read}); "
+                         f"attached to another take it would be stale there at once. Run the step on {attach} instead")
 
 
 def _check_not_layer_of(output, out: Path, owner: str, files: list[StackFile], role: str | None) -> None:

@@ -24,11 +24,13 @@ from pxr import Sdf, Vt
 
 from facedyn.errors import UsageError
 from facedyn.performance import role as find_role
+from facedyn.performance import roles
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layers import check_writable, export_atomically, new_take_root
 from facedyn.usd.layerstack import CAPTURED, Entry, effective_ranks, place, recorded_role_name
 from facedyn.usd.runs import facedyn_metadata
-from facedyn.usd.stackstatus import MUTED_KEY, frame_range, muted_assets, open_root, read_entries, stack_status, take_frames
+from facedyn.usd.stackstatus import (MUTED_KEY, check_take_root, frame_range, muted_assets, open_root, read_entries, stack_status,
+                                     take_frames)
 from facedyn.usd.stage import relative_asset_path, resolve_asset_path
 from facedyn.usd.timing import Timing
 
@@ -221,6 +223,7 @@ def recorded_actor(root: str | os.PathLike) -> Path | None:
 def _editing(root: str | os.PathLike) -> Iterator[Sdf.Layer]:
     """The root, locked and read fresh; written back atomically when the block succeeds."""
     root = Path(root)
+    check_take_root(root)
     with root_lock(root):
         layer = _check_editable(root)
         yield layer
@@ -249,7 +252,9 @@ def mute(root: str | os.PathLike, layer: str | os.PathLike) -> list[str]:
     root = Path(root)
     with _editing(root) as edited:
         assets = list(edited.subLayerPaths)
-        asset = assets.pop(_find(layer, assets, root, "subLayers"))
+        index = _find(layer, assets, root, "subLayers")
+        _refuse_capture(root, assets[index], "muted")
+        asset = assets.pop(index)
         edited.subLayerPaths = assets
         _set_muted(edited, muted_assets(edited) + [asset])
     return assets
@@ -283,12 +288,20 @@ def detach(root: str | os.PathLike, layer: str | os.PathLike) -> list[str]:
         assets, muted = list(edited.subLayerPaths), muted_assets(edited)
         index = _lookup(layer, assets, root)
         if index is not None:
+            _refuse_capture(root, assets[index], "detached")
             assets.pop(index)
             edited.subLayerPaths = assets
         else:
             muted.pop(_find(layer, muted, root, "subLayers or muted layers"))
             _set_muted(edited, muted)
     return assets
+
+
+def _refuse_capture(root: Path, asset: str, what: str) -> None:
+    """The captured layer is the take itself: every other layer is computed from it, and it sets the take's frames."""
+    if Entry.read(asset, root.parent, roles()).role_name == CAPTURED:
+        raise UsageError(f"{root}: {asset} is the take's captured layer, which every other layer is computed from; it cannot "
+                         f"be {what} (re-import the take to replace it)")
 
 
 def move(root: str | os.PathLike, layer: str | os.PathLike, above: str | os.PathLike | None = None,

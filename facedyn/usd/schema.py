@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Sdf, Usd, Vt
 
-from facedyn.usd.runs import LayerInput, run_id
+from facedyn.usd.runs import INPUT_IDENTITY, LayerInput, run_id
 from facedyn.usd.stage import relative_asset_path
 
 SKULL_API = "FacedynSkullAPI"
@@ -137,6 +137,7 @@ class Provenance:
             frame_range=frame_range,
             inputs=tuple(relative_asset_path(i.path, anchor_dir) if os.path.isabs(i.path) else i.path for i in inputs),
             input_runs=tuple(i.run for i in inputs),
+            input_kinds=tuple(i.kind for i in inputs),
             run=run_id(self.processor, self.version, parameters, frame_range, [i.run for i in inputs]),
         )
 
@@ -151,7 +152,8 @@ class RunRecord:
     parameters: str  # JSON, keys sorted
     frame_range: tuple[float, float]
     inputs: tuple[str, ...]  # asset paths relative to the layer (or labels that name no file)
-    input_runs: tuple[str, ...]  # each input's run id ("" for a label)
+    input_runs: tuple[str, ...]  # each input's content id (runs.content_id; "" for a label)
+    input_kinds: tuple[str, ...]  # each input's kind: runs.LAYER (of the stack read) or runs.FILE
     run: str
 
     @property
@@ -168,6 +170,8 @@ class RunRecord:
             "frameRange": Vt.DoubleArray(list(self.frame_range)),
             "inputs": Vt.StringArray(list(self.inputs)),
             "inputRuns": Vt.StringArray(list(self.input_runs)),
+            "inputKinds": Vt.StringArray(list(self.input_kinds)),
+            "inputIdentity": INPUT_IDENTITY,
             "run": self.run,
         }
 
@@ -186,9 +190,12 @@ class RunRecord:
 
 
 def recorded_inputs(data: dict) -> list[dict]:
-    """customLayerData["facedyn"]'s inputs as [{layer, run}] (run "" where an older layer kept none)."""
+    """customLayerData["facedyn"]'s inputs as [{layer, run, kind}] (run "" where an older layer kept none; kind
+    "" where it kept no kinds)."""
     layers, runs = string_list(data.get("inputs", [])) or [], string_list(data.get("inputRuns", [])) or []
-    return [{"layer": layer, "run": runs[k] if k < len(runs) else ""} for k, layer in enumerate(layers)]
+    kinds = string_list(data.get("inputKinds", [])) or []
+    return [{"layer": layer, "run": runs[k] if k < len(runs) else "", "kind": kinds[k] if k < len(kinds) else ""}
+            for k, layer in enumerate(layers)]
 
 
 def string_list(value) -> list[str] | None:

@@ -1,10 +1,18 @@
 """The state of a take's layer stack: each layer's role, coverage and staleness.
 
-A layer is stale when what it was computed from is no longer what lies below it: a layer
-below it was re-run (its run id changed), replaced, added, reordered or removed, or another
-input (a model file, a source mesh) changed or vanished. Its recorded inputs say which
-(facedyn.usd.runs); layers written before inputs carried run ids cannot be checked and are
-never reported stale. Everything is read from the files' metadata, nothing is composed.
+A layer is stale when what it was computed from is no longer what lies below it: the
+content of a layer below changed (re-run, replaced, or edited by hand), a layer was added
+below it, reordered, muted or removed, or another input it read (a model file) changed.
+Inputs are identified by content (facedyn.usd.runs), so a take folder moved or copied
+stays current, and an input that cannot be found from here (a model left behind when the
+folder was copied) is reported as unchecked, not stale: nothing says its content changed.
+A captured layer is the take's content; the source it was imported from is its history,
+never checked. Layers written before inputs carried ids cannot be checked and are never
+reported stale.
+
+`stack_status` is the one place that decides each layer's state (`LayerStatus.state`):
+`usdfacedyn layers`, `inspect` and `validate` all read it. Everything is read from the
+files' metadata and bytes, nothing is composed.
 """
 from __future__ import annotations
 
@@ -18,8 +26,8 @@ from pxr import Sdf, Tf, Usd
 
 from facedyn.performance import roles
 from facedyn.usd.errors import TakeError
-from facedyn.usd.layerstack import CAPTURED, Entry, effective_ranks
-from facedyn.usd.runs import current_run
+from facedyn.usd.layerstack import CAPTURED, Entry, effective_ranks, is_take_root, recorded_role_name
+from facedyn.usd.runs import INPUT_IDENTITY, LAYER, content_id, facedyn_metadata, legacy_id
 from facedyn.usd.schema import recorded_inputs
 from facedyn.usd.stage import relative_asset_path, resolve_asset_path
 
@@ -41,6 +49,17 @@ class LayerStatus:
     take_frames: tuple[float, float] | None  # the take's frames (its capture's)
     stale: bool
     reason: str  # why it is stale ("" when it is not)
+    needs: str = ""  # the role it is computed from, when no layer of that role lies below it
+    unchecked: str = ""  # an input whose content could not be checked (not found from here)
+
+    @property
+    def state(self) -> str:
+        """muted, missing, stale (or fed by nothing of the role it reads) or ok: what `layers` prints and validate reports."""
+        if self.muted:
+            return "muted"
+        if not self.exists:
+            return "missing"
+        return "stale" if self.stale or self.needs else "ok"
 
     @property
     def covers(self) -> bool:
@@ -51,7 +70,7 @@ class LayerStatus:
 
     def as_dict(self) -> dict:
         d = asdict(self)
-        d.update(path=str(self.path), covers=self.covers)
+        d.update(path=str(self.path), covers=self.covers, state=self.state)
         return d
 
 
@@ -69,6 +88,32 @@ def open_root(root: str | os.PathLike, metadata_only: bool = True) -> Sdf.Layer:
     return layer
 
 
+def check_take_root(path: str | os.PathLike) -> None:
+    """Raise a TakeError unless path is a take root (a layer that lists a take's layers), naming the root that lists it if one is beside it."""
+    path = Path(path)
+    if is_take_root(open_root(path)):
+        return
+    roots = roots_listing(path)
+    hint = f"; its take root is {roots[0]}" if roots else "; give the take's root (take.usda), which lists its layers"
+    raise TakeError(f"{path}: not a take root, it lists no layers{hint}")
+
+
+def roots_listing(path: Path) -> list[Path]:
+    """The take roots in path's folder that list it (in their subLayers or as muted)."""
+    target, found = path.resolve(), []
+    for candidate in sorted(path.parent.iterdir()):
+        if candidate.resolve() == target or not candidate.is_file() or candidate.suffix.lower() not in (".usda", ".usd", ".usdc"):
+            continue
+        try:
+            layer = Sdf.Layer.OpenAsAnonymous(str(candidate), metadataOnly=True)
+        except Tf.ErrorException:
+            continue
+        if layer is not None and is_take_root(layer) and any(
+                resolve_asset_path(a, candidate.parent) == target for a in list(layer.subLayerPaths) + muted_assets(layer)):
+            found.append(candidate)
+    return found
+
+
 def muted_assets(layer: Sdf.Layer) -> list[str]:
     data = dict(layer.customLayerData).get("facedyn")
     return [str(a) for a in data.get(MUTED_KEY, [])] if isinstance(data, dict) else []
@@ -83,23 +128,43 @@ def stack_status(root: str | os.PathLike) -> list[LayerStatus]:
     """Every layer of the root, strongest first, then the layers muted on disk."""
     root = Path(root)
     layer = open_root(root)
-    entries = read_entries(layer, root.parent)
+    itself = root.resolve()
+    entries = [e for e in read_entries(layer, root.parent) if e.path != itself]  # a self-listing is reported by lists_itself
     muted = read_entries(layer, root.parent, muted_assets(layer))
     take = take_frames(layer, entries)
     ranks = effective_ranks(entries)
+    known = roles()
     statuses = []
     for i, entry in enumerate(entries):
         below = [e for e, r in zip(entries[i + 1 :], ranks[i + 1 :]) if r < ranks[i]]
-        statuses.append(_status(entry, False, take, staleness(entry, below)))
+        reason, unchecked = staleness(entry, below)
+        needs = known[entry.role_name].reads if entry.role_name in known else None
+        missing_source = needs if needs and not any(e.role_name == needs for e in entries[i + 1 :]) else ""
+        statuses.append(_status(entry, False, take, reason, missing_source, unchecked))
     return statuses + [_status(entry, True, take, "") for entry in muted]
 
 
-def _status(entry: Entry, muted: bool, take: tuple[float, float] | None, reason: str) -> LayerStatus:
+def _status(entry: Entry, muted: bool, take: tuple[float, float] | None, reason: str, needs: str = "",
+            unchecked: str = "") -> LayerStatus:
     return LayerStatus(
         asset=entry.asset, path=entry.path, role=entry.role_name, processor=entry.processor,
         rank=entry.rank, muted=muted, exists=entry.path.is_file(), frames=frame_range(entry.metadata),
-        take_frames=take, stale=bool(reason), reason=reason,
+        take_frames=take, stale=bool(reason), reason=reason, needs=needs, unchecked=unchecked,
     )
+
+
+def stale_below(root: str | os.PathLike, role_name: str) -> list[LayerStatus]:
+    """The layers a step writing role_name would read (those of lower rank) that are stale or missing."""
+    rank = roles()[role_name].rank
+    return [s for s in stack_status(root) if not s.muted and s.rank is not None and s.rank < rank and s.state in ("stale", "missing")]
+
+
+def lists_itself(root: str | os.PathLike) -> str | None:
+    """The entry by which a take root lists itself among its subLayers (None when it does not)."""
+    root = Path(root)
+    itself = root.resolve()
+    layer = open_root(root)
+    return next((a for a in list(layer.subLayerPaths) if resolve_asset_path(a, root.parent) == itself), None)
 
 
 def frame_range(data: dict | None) -> tuple[float, float] | None:
@@ -121,35 +186,52 @@ def take_frames(root_layer: Sdf.Layer, entries: list[Entry]) -> tuple[float, flo
     return None
 
 
-def staleness(entry: Entry, below: list[Entry]) -> str:
-    """Why `entry` no longer matches what it was computed from ("" when it still does)."""
+def staleness(entry: Entry, below: list[Entry]) -> tuple[str, str]:
+    """Why `entry` no longer matches what it was computed from ("" when it still does), and an input it could not check.
+
+    Compared: the layers below it with the layers it read (same files, same content, same
+    order, none gone), and its other inputs' content where they can be found.
+    """
     data = entry.metadata
     if not data or "run" not in data or not entry.path.is_file():
-        return ""
+        return "", ""
+    identify = content_id if data.get("inputIdentity") == INPUT_IDENTITY else legacy_id
     anchor = entry.path.parent
-    recorded = [(resolve_asset_path(i["layer"], anchor), i["run"]) for i in recorded_inputs(data) if i["run"]]
-    recorded_paths = [p for p, _ in recorded]
+    recorded = [(resolve_asset_path(i["layer"], anchor), i["run"], i["kind"]) for i in recorded_inputs(data) if i["run"]]
+    recorded_paths = [p for p, _, _ in recorded]
     positions = []
     for layer in below:
         if layer.path not in recorded_paths:
-            return f"{layer.asset} lies below it but is not what it was computed from"
+            return f"{layer.asset} lies below it but is not what it was computed from", ""
         position = recorded_paths.index(layer.path)
-        now = current_run(layer.path)
+        now = identify(layer.path)
         if now != recorded[position][1]:
-            return f"its input {layer.asset} changed since (run {recorded[position][1]}, now {now or 'gone'})"
+            return f"its input {layer.asset} changed since (content {recorded[position][1]}, now {now or 'gone'})", ""
         positions.append(position)
     if positions != sorted(positions):
-        return "the layers below it were reordered since it was computed"
+        return "the layers below it were reordered since it was computed", ""
     below_paths = {layer.path for layer in below}
-    for path, run in recorded:
+    unchecked = ""
+    for path, run, kind in recorded:
         if path in below_paths:
             continue
         name = relative_asset_path(path, anchor)
+        if _was_stack_layer(kind, path):
+            return f"its input {name} is no longer below it (muted, detached or gone)", ""
+        if entry.role_name == CAPTURED:
+            continue  # the capture is the take's content; its source is history
         if not path.is_file():
-            return f"its input {name} is gone"
-        if current_run(path) != run:
-            return f"its input {name} changed since it was computed"
-    return ""
+            unchecked = unchecked or f"its input {name} is not found from here; its content was not checked"
+        elif identify(path) != run:
+            return f"its input {name} changed since it was computed", ""
+    return "", unchecked
+
+
+def _was_stack_layer(kind: str, path: Path) -> bool:
+    """Whether a recorded input was a layer of the stack the run read (older layers: a facedyn layer with a role)."""
+    if kind:
+        return kind == LAYER
+    return path.is_file() and recorded_role_name(facedyn_metadata(path)) is not None
 
 
 def covers_take(root_or_stage: str | os.PathLike | Usd.Stage, frames: tuple[float, float]) -> bool:
@@ -166,11 +248,18 @@ def format_layers(statuses: list[LayerStatus]) -> str:
     """The stack as a table, strongest first (what `usdfacedyn layers TAKE` prints)."""
     lines = []
     for s in statuses:
-        state = "muted" if s.muted else ("missing" if not s.exists else ("stale" if s.stale else "ok"))
         frames = f"{s.frames[0]:g}..{s.frames[1]:g}" if s.frames else "-"
         if not s.covers:
             frames += f" (take {s.take_frames[0]:g}..{s.take_frames[1]:g})"
-        lines.append(f"{s.asset:<36} {s.role or '-':<12} {s.processor or '-':<12} {frames:<24} {state}")
+        lines.append(f"{s.asset:<36} {s.role or '-':<12} {s.processor or '-':<12} {frames:<24} {s.state}")
         if s.stale:
             lines.append(f"    stale: {s.reason}")
+        if s.needs:
+            lines.append(f"    stale: {needs_message(s)}")
+        if s.unchecked:
+            lines.append(f"    unchecked: {s.unchecked}")
     return "\n".join(lines)
+
+
+def needs_message(status: LayerStatus) -> str:
+    return f"a {status.role} layer needs a {status.needs} layer below it, and none is"

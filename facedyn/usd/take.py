@@ -19,7 +19,7 @@ from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layers import frame_extents
 from facedyn.usd.layerstack import LEGACY_PROCESSOR_ROLES, is_take_root, layer_metadata, role_of
-from facedyn.usd.runs import IN_MEMORY, LayerInput, current_run
+from facedyn.usd.runs import IN_MEMORY, LAYER, LayerInput, content_id
 from facedyn.usd.stage import get_prim, layer_name, open_stage
 from facedyn.usd.takechecks import frame_grid_problem, missing_keys_problem, orient_problem, units_problem
 from facedyn.usd.timing import Timing
@@ -119,12 +119,12 @@ def read_stage(
 
 
 def read_inputs(stage: Usd.Stage) -> tuple[LayerInput, ...]:
-    """The data layers of the stage's (unmuted) layer stack with their run ids; roots that only list others are left out."""
+    """The data layers of the stage's (unmuted) layer stack with their content ids; roots that only list others are left out."""
     inputs = []
     for layer in stage.GetLayerStack(includeSessionLayers=False):
         if is_take_root(layer):
             continue
-        inputs.append(LayerInput(layer.realPath, current_run(layer.realPath)) if layer.realPath else LayerInput(IN_MEMORY, ""))
+        inputs.append(LayerInput(layer.realPath, content_id(layer.realPath), LAYER) if layer.realPath else LayerInput(IN_MEMORY, ""))
     return tuple(inputs)
 
 

@@ -15,11 +15,10 @@ from pathlib import Path
 import numpy as np
 from pxr import Usd, UsdGeom, UsdValidation
 
-from facedyn.performance import roles
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import is_take_root
-from facedyn.usd.stackstatus import open_root, stack_status
+from facedyn.usd.stackstatus import needs_message, open_root, stack_status
 from facedyn.usd.stage import layer_name, open_stage, resolve_asset_path
 from facedyn.usd.take import find_face_mesh, read_skull_transforms
 from facedyn.usd.takechecks import frame_grid_problem, units_problem
@@ -84,24 +83,24 @@ def stack_findings(root: Path) -> list[Finding]:
         elif path in seen:
             findings.append(Finding("error", "facedyn:LayerStack", f"{root}: lists {asset} twice (also as {seen[path]})"))
         seen.setdefault(path, asset)
-    known = roles()
     listed = [s for s in stack_status(root) if not s.muted]
     ranked = [s for s in listed if s.rank is not None]
     for upper, lower in zip(ranked, ranked[1:]):
         if upper.rank < lower.rank:
             findings.append(Finding("error", "facedyn:LayerOrder", f"{root}: {upper.asset} ({upper.role}) sits above {lower.asset} ({lower.role}), "
                                     f"whose role ranks higher; it would hide it (usdfacedyn layers can put them back in order)"))
-    for i, s in enumerate(listed):
-        if not s.exists:
+    for s in listed:  # each layer's state as stackstatus decides it, so validate and `usdfacedyn layers` agree
+        if s.state == "missing":
             findings.append(_layer_finding(s, "error", "facedyn:LayerStack", f"{root}: lists {s.asset}, which does not exist"))
         if not s.covers:
             findings.append(_layer_finding(s, "error", "facedyn:FrameCoverage", f"{s.asset}: covers frames {s.frames[0]:g}..{s.frames[1]:g}, the take "
                                     f"{s.take_frames[0]:g}..{s.take_frames[1]:g}; the frames it lacks hold its nearest value"))
-        needs = known[s.role].reads if s.role in known else None
-        if needs and not any(below.role == needs for below in listed[i + 1 :]):
-            findings.append(_layer_finding(s, "error", "facedyn:LayerRequires", f"{s.asset}: a {s.role} layer needs a {needs} layer below it, and none is"))
+        if s.needs:
+            findings.append(_layer_finding(s, "error", "facedyn:LayerRequires", f"{s.asset}: {needs_message(s)}"))
         if s.stale:
             findings.append(_layer_finding(s, "warning", "facedyn:Stale", f"{s.asset}: stale, {s.reason}"))
+        if s.unchecked:
+            findings.append(_layer_finding(s, "warning", "facedyn:Unchecked", f"{s.asset}: {s.unchecked}"))
     return findings
 
 

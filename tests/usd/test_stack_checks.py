@@ -32,13 +32,16 @@ def test_every_layer_records_its_role_and_a_run_id_computed_from_its_inputs(tmp_
     capture = _meta(tmp_path / "capture.usdc")
     assert quasistatic["processor"] == "remove" and quasistatic["role"] == "quasistatic"
     assert list(quasistatic["inputs"]) == ["./stabilized.usdc", "./capture.usdc"]
-    assert list(quasistatic["inputRuns"]) == [stabilized["run"], capture["run"]]
+    # Every input is identified by its content: a sha256 of its bytes, the layers read as much as any other file.
+    contents = [hashlib.sha256((tmp_path / n).read_bytes()).hexdigest()[:16] for n in ("stabilized.usdc", "capture.usdc")]
+    assert list(quasistatic["inputRuns"]) == contents and list(quasistatic["inputKinds"]) == ["layer", "layer"]
+    assert quasistatic["inputIdentity"] == "content" and stabilized["run"] not in contents
     # The run id is the sha256 of the canonical JSON of what the run was (DESIGN: same inputs, same id).
     canonical = json.dumps({"processor": "remove", "version": "test 1", "parameters": {}, "frameRange": [1001.0, 1010.0],
-                            "inputs": [stabilized["run"], capture["run"]]}, sort_keys=True, separators=(",", ":"))
+                            "inputs": contents}, sort_keys=True, separators=(",", ":"))
     assert quasistatic["run"] == hashlib.sha256(canonical.encode()).hexdigest()[:16]
-    # A file that is no facedyn layer is identified by its bytes.
     assert list(capture["inputRuns"]) == [hashlib.sha256(b"the studio's mesh cache").hexdigest()[:16]]
+    assert list(capture["inputKinds"]) == ["file"]
     stage = Usd.Stage.Open(str(root))
     face = stage.GetPrimAtPath("/Performance/Skull/Face")
     runs = {run["processor"]: run for run in schema.read_provenance(face)}
@@ -97,7 +100,7 @@ def test_outputs_that_replace_their_own_roles_layer_are_fine(tmp_path):
         check_output_paths(tmp_path / "quasistatic.usdc", [root], attach=root, role="stabilized")
 
 
-def test_a_changed_or_vanished_model_makes_its_layer_stale(tmp_path):
+def test_a_changed_model_makes_its_layer_stale_and_a_vanished_one_unchecked(tmp_path):
     root, _ = make_capture(tmp_path)
     attach(root, write_role_layer(root, "stabilized.usdc", "stabilized"))
     model = tmp_path / "removal.model"
@@ -107,8 +110,11 @@ def test_a_changed_or_vanished_model_makes_its_layer_stale(tmp_path):
     model.write_bytes(b"weights v2, retrained")
     status = {s.asset: s for s in stack_status(root)}
     assert status["./quasistatic.usdc"].reason == "its input ./removal.model changed since it was computed"
+    # A model that cannot be found (a take folder copied without it) says nothing about its content: unchecked, not stale.
     model.unlink()
-    assert {s.asset: s for s in stack_status(root)}["./quasistatic.usdc"].reason == "its input ./removal.model is gone"
+    status = {s.asset: s for s in stack_status(root)}["./quasistatic.usdc"]
+    assert status.state == "ok" and status.unchecked == "its input ./removal.model is not found from here; its content was not checked"
+    assert ("warning", "facedyn:Unchecked", f"./quasistatic.usdc: {status.unchecked}") in _facedyn_findings(root)
 
 
 def test_reordered_variants_make_the_overlay_above_them_stale(tmp_path):
