@@ -185,12 +185,13 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
 
     frames = output.layer.frames
     first, last = float(frames[0]), float(frames[-1])
+    parameters, files = _recorded_parameters(processor, request)
     provenance = schema.Provenance(
         processor=processor.name,
         version=f"facedyn {facedyn.__version__}, {processor.name} {processor.version}",
-        parameters={k: _plain(v) for k, v in request.params.items()},
+        parameters=parameters,
         frame_range=(first, last),
-        inputs=output.inputs,
+        inputs=_with_files(output.inputs, files),
         role=processor.writes.role,
     )
     root = output.root or request.attach
@@ -210,6 +211,35 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
                                   create_with=output.timing if output.define else None, actor=output.actor)
     report.update(root=str(root), sublayers=placed.sublayers, stale=placed.stale)
     return report
+
+
+def _recorded_parameters(processor: Processor, request: Request) -> tuple[dict[str, Any], list[Path]]:
+    """The parameters as a layer records them, and the files they name.
+
+    A file parameter (a model, an actor) is recorded relative to the layer's folder, so the
+    same run of a take moved or copied elsewhere gives the same bytes, and the file is an
+    input of the layer, identified by its content like the layers it read.
+    """
+    from facedyn.usd.stage import relative_asset_path
+
+    typed = {p.name: p.type for p in processor.parameters}
+    recorded, files = {}, []
+    for name, value in request.params.items():
+        if typed.get(name) is Path and value is not None and Path(value).is_file():
+            recorded[name] = relative_asset_path(value, request.output.parent)
+            files.append(Path(value).resolve())
+        else:
+            recorded[name] = _plain(value)
+    return recorded, files
+
+
+def _with_files(inputs: list, files: list[Path]) -> list:
+    """inputs and, after them, the files not among them already (by real path)."""
+    from facedyn.usd.runs import LayerInput
+
+    named = {Path(i.path if isinstance(i, LayerInput) else i).resolve() for i in inputs
+             if not (isinstance(i, LayerInput) and not Path(i.path).is_absolute())}
+    return list(inputs) + [f for f in files if f not in named]
 
 
 def _plain(value: Any) -> Any:
