@@ -106,6 +106,7 @@ def _check_paths(processor: Processor, request: Request) -> None:
 
 def _check_fresh_below(inputs: list[Path], role_name: str) -> None:
     """Refuse to compute over a stale layer: the result would be fresh over a layer that no longer matches the capture."""
+    from facedyn.processors import registry
     from facedyn.usd.errors import TakeError
     from facedyn.usd.layerstack import is_take_root
     from facedyn.usd.stackstatus import needs_message, open_root, stale_below
@@ -118,7 +119,8 @@ def _check_fresh_below(inputs: list[Path], role_name: str) -> None:
             continue  # an unreadable take is reported by its reader
         for status in stale_below(path, role_name):
             why = "it is missing" if status.state == "missing" else (status.reason or needs_message(status))
-            fix = f"re-run `usdfacedyn {status.processor}` on {path} first" if status.processor else f"detach it from {path}"
+            fix = (f"re-run `usdfacedyn {status.processor}` on {path} first" if status.processor in registry.available()
+                   else f"recompute it (its writer: {status.processor or 'unknown'}) or detach it from {path}")
             raise TakeError(f"{path}: the layer {status.asset} it would read is {status.state}: {why}. To bring it up to date, {fix}")
 
 
@@ -185,7 +187,8 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
 
     frames = output.layer.frames
     first, last = float(frames[0]), float(frames[-1])
-    parameters, files = _recorded_parameters(processor, request)
+    root = output.root or request.attach
+    parameters, files = _recorded_parameters(processor, request, root)
     provenance = schema.Provenance(
         processor=processor.name,
         version=f"facedyn {facedyn.__version__}, {processor.name} {processor.version}",
@@ -194,7 +197,6 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
         inputs=_with_files(output.inputs, files),
         role=processor.writes.role,
     )
-    root = output.root or request.attach
 
     def write():
         layers.write_layer(request.output, output.layer, output.timing, provenance, define=output.define, chunks=output.chunks)
@@ -213,21 +215,24 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
     return report
 
 
-def _recorded_parameters(processor: Processor, request: Request) -> tuple[dict[str, Any], list[Path]]:
-    """The parameters as a layer records them, and the files they name.
+def _recorded_parameters(processor: Processor, request: Request, root: Path | None) -> tuple[dict[str, Any], list[Path]]:
+    """The parameters as a layer records them, and the files they name that the run reads.
 
-    A file parameter (a model, an actor) is recorded relative to the layer's folder, so the
+    A path parameter (a model, an actor) is recorded relative to the layer's folder, so the
     same run of a take moved or copied elsewhere gives the same bytes, and the file is an
-    input of the layer, identified by its content like the layers it read.
+    input of the layer, identified by its content like the layers it read. The take root
+    the layer goes into (import's --root) is where it is written, not what it read.
     """
     from facedyn.usd.stage import relative_asset_path
 
     typed = {p.name: p.type for p in processor.parameters}
+    written = Path(root).resolve() if root is not None else None
     recorded, files = {}, []
     for name, value in request.params.items():
-        if typed.get(name) is Path and value is not None and Path(value).is_file():
+        if typed.get(name) is Path and value is not None:
             recorded[name] = relative_asset_path(value, request.output.parent)
-            files.append(Path(value).resolve())
+            if Path(value).is_file() and Path(value).resolve() != written:
+                files.append(Path(value).resolve())
         else:
             recorded[name] = _plain(value)
     return recorded, files

@@ -29,6 +29,7 @@ from facedyn.sim.tissue import TissueParams
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layers import LayerContent, write_layer, write_take_root
+from facedyn.usd.runs import LAYER, LayerInput, content_id
 from facedyn.usd.take import read_take
 from facedyn.usd.timing import Timing
 
@@ -56,12 +57,12 @@ def write_simulated_take(folder: Path, take: SimulatedPerformance, rig: FaceRig)
         folder / "truth" / "skull.usdc",
         LayerContent(frames=frames, points=take.captured, skull_translate=take.skull_translate, skull_orient=take.skull_orient,
                      face=schema.FaceAttributes(role="stabilized"), skull=schema.SkullAttributes(solver="truth")),
-        timing, _provenance("simulate-truth-skull", spec, frames, [str(capture)]),
+        timing, _provenance("simulate-truth-skull", spec, frames, _layers(capture)),
     )
     quasistatic = write_layer(
         folder / "truth" / "quasistatic.usdc",
         LayerContent(frames=frames, points=take.quasistatic, offsets=take.offsets, face=schema.FaceAttributes(role="quasistatic")),
-        timing, _provenance("simulate-truth-quasistatic", spec, frames, [str(skull)]),
+        timing, _provenance("simulate-truth-quasistatic", spec, frames, _layers(skull, capture)),
     )
     write_take_root(folder / "take.usda", [capture], timing)
     write_take_root(folder / "truth.usda", [quasistatic, skull, capture], timing)
@@ -86,7 +87,12 @@ def alignment_vertices(rig: FaceRig) -> np.ndarray | None:
     return np.array([rig.landmarks[name] for name in names], np.int32)
 
 
-def _provenance(processor: str, spec: dict, frames: np.ndarray, inputs: list[str]) -> schema.Provenance:
+def _layers(*paths: Path) -> list[LayerInput]:
+    """The truth layers below a truth layer, as the inputs it is computed from (so truth.usda's stack reads as current)."""
+    return [LayerInput(str(Path(p).resolve()), content_id(p), LAYER) for p in paths]
+
+
+def _provenance(processor: str, spec: dict, frames: np.ndarray, inputs: list) -> schema.Provenance:
     return schema.Provenance(processor, f"facedyn {facedyn.__version__}", spec, (float(frames[0]), float(frames[-1])), inputs)
 
 

@@ -31,6 +31,7 @@ from facedyn.usd.runs import INPUT_IDENTITY, LAYER, content_id, facedyn_metadata
 from facedyn.usd.schema import recorded_inputs
 from facedyn.usd.stage import relative_asset_path, resolve_asset_path
 
+LEGACY_UNCHECKED = "written before inputs were identified by content: checked by the runs it recorded; re-run it to check content"
 MUTED_KEY = "muted"  # root customLayerData["facedyn"][MUTED_KEY]: entries muted on disk
 
 
@@ -211,7 +212,8 @@ def staleness(entry: Entry, below: list[Entry]) -> tuple[str, str]:
     if positions != sorted(positions):
         return "the layers below it were reordered since it was computed", ""
     below_paths = {layer.path for layer in below}
-    unchecked = ""
+    legacy = identify is legacy_id and recorded and entry.role_name != CAPTURED
+    unchecked = LEGACY_UNCHECKED if legacy else ""
     for path, run, kind in recorded:
         if path in below_paths:
             continue

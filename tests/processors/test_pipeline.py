@@ -408,8 +408,9 @@ def test_issue_15_partial_frames_and_failed_attaches_leave_nothing(corpus, tmp_p
     assert "covers only part" in capsys.readouterr().err and not (take / "stabilized.usdc").exists()
     assert cli("stabilize", root, "-o", take / "partial.usdc", "--frames", middle) == 0  # not attached: allowed
     (take / "broken.usda").write_text("#usda 1.0\n(\n garbage\n")
-    for bad_root in (take / "missing.usda", take / "broken.usda"):
-        assert cli("stabilize", root, "-o", take / "orphan.usdc", "--attach", bad_root) == 1
+    for bad_root in (take / "missing.usda", take / "broken.usda"):  # not the root read: refused before any work
+        assert cli("stabilize", root, "-o", take / "orphan.usdc", "--attach", bad_root) == 2
+        assert "a layer goes only into the root whose layers it was computed from" in capsys.readouterr().err
         assert not (take / "orphan.usdc").exists()
     assert _stack(root) == ["./capture.usdc"]
 

@@ -142,7 +142,8 @@ def test_layers_written_before_content_ids_are_still_checked_by_their_runs(tmp_p
     data["facedyn"] = facedyn
     old.customLayerData = data
     old.Export(str(tmp_path / "quasistatic.usdc"))
-    assert _states(root)["./quasistatic.usdc"] == "ok"
+    status = {s.asset: s for s in stack_status(root)}["./quasistatic.usdc"]
+    assert status.state == "ok" and status.unchecked.startswith("written before inputs were identified by content")
     attach(root, write_role_layer(root, "stabilized.usdc", "stabilized", params={"iterations": 3}))  # a re-run below it
     assert _states(root)["./quasistatic.usdc"] == "stale"
 
@@ -218,3 +219,13 @@ def test_layers_on_a_data_layer_names_its_root(tmp_path, capsys):
     assert cli("layers", tmp_path / "capture.usdc") == 1
     assert "its take root is" in capsys.readouterr().err
     check_take_root(root)
+
+
+def test_a_simulated_takes_truth_stack_reads_as_current(tmp_path):
+    from facedyn.sim.corpus import TakeSpec, simulate_take
+    from facedyn.sim.default_face import default_face
+    from facedyn.usd.corpus import write_simulated_take
+
+    rig = default_face(8)
+    write_simulated_take(tmp_path, simulate_take(rig, TakeSpec("walk", "walk", "smile", duration_s=0.3, seed=1)), rig)
+    assert [s.state for s in stack_status(tmp_path / "truth.usda")] == ["ok", "ok", "ok"]
