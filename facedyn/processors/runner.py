@@ -239,11 +239,11 @@ def _recorded_parameters(processor: Processor, request: Request, root: Path | No
 
 
 def _with_files(inputs: list, files: list[Path]) -> list:
-    """inputs and, after them, the files not among them already (by real path)."""
+    """inputs and, after them, the files not among them already (by real path; labels name no file)."""
     from facedyn.usd.runs import LayerInput
 
-    named = {Path(i.path if isinstance(i, LayerInput) else i).resolve() for i in inputs
-             if not (isinstance(i, LayerInput) and not Path(i.path).is_absolute())}
+    paths = [Path(i.path if isinstance(i, LayerInput) else i) for i in inputs]
+    named = {p.resolve() for p in paths if p.is_absolute()}
     return list(inputs) + [f for f in files if f not in named]
 
 

@@ -7,8 +7,9 @@ Inputs are identified by content (facedyn.usd.runs), so a take folder moved or c
 stays current, and an input that cannot be found from here (a model left behind when the
 folder was copied) is reported as unchecked, not stale: nothing says its content changed.
 A captured layer is the take's content; the source it was imported from is its history,
-never checked. Layers written before inputs carried ids cannot be checked and are never
-reported stale.
+never checked. Layers written before inputs were identified by content are checked by the
+runs they recorded (an edit that kept a layer's run cannot be seen: they say so, as
+unchecked); layers written before inputs carried any id are never reported stale.
 
 `stack_status` is the one place that decides each layer's state (`LayerStatus.state`):
 `usdfacedyn layers`, `inspect` and `validate` all read it. Everything is read from the
@@ -51,7 +52,7 @@ class LayerStatus:
     stale: bool
     reason: str  # why it is stale ("" when it is not)
     needs: str = ""  # the role it is computed from, when no layer of that role lies below it
-    unchecked: str = ""  # an input whose content could not be checked (not found from here)
+    unchecked: str = ""  # what of its inputs' content could not be checked (an input not found from here, an older layer)
 
     @property
     def state(self) -> str:

@@ -229,3 +229,22 @@ def test_a_simulated_takes_truth_stack_reads_as_current(tmp_path):
     rig = default_face(8)
     write_simulated_take(tmp_path, simulate_take(rig, TakeSpec("walk", "walk", "smile", duration_s=0.3, seed=1)), rig)
     assert [s.state for s in stack_status(tmp_path / "truth.usda")] == ["ok", "ok", "ok"]
+
+
+def test_a_model_named_by_a_parameter_is_recorded_relative_to_the_layer_and_once_as_an_input(tmp_path):
+    from facedyn.processors import registry
+    from facedyn.processors.base import Request
+    from facedyn.processors.runner import _recorded_parameters, _with_files
+
+    take, models = tmp_path / "take", tmp_path / "models"
+    take.mkdir()
+    models.mkdir()
+    (models / "f.removal").write_bytes(b"weights")
+    remove = registry.load("remove")
+    request = Request(inputs=[take / "take.usda"], output=take / "quasistatic.usdc",
+                      params=remove.resolve_params({"model": models / "f.removal"}), attach=take / "take.usda")
+    parameters, files = _recorded_parameters(remove, request, request.attach)
+    assert parameters["model"] == "../models/f.removal" and files == [(models / "f.removal").resolve()]
+    read = [str((take / "capture.usdc").resolve()), str((models / "f.removal").resolve())]  # remove's own inputs name it already
+    assert _with_files(read, files) == read
+    assert _with_files(["DefaultFace"], files) == ["DefaultFace", (models / "f.removal").resolve()]
