@@ -83,7 +83,8 @@ def check_output_paths(
                         "Give a take root (.usda) instead"
                     )
         _check_not_layer_of(output, out, str(target), stack_files(target_path)[1:], role)
-    if attach is not None and inputs and Path(attach).resolve() not in {Path(i).resolve() for i in inputs}:
+    reads_a_take = root is None  # an import (which has a root of its own) reads sources, and refuses --attach itself
+    if attach is not None and reads_a_take and inputs and Path(attach).resolve() not in {Path(i).resolve() for i in inputs}:
         read = ", ".join(str(i) for i in inputs)
         raise UsageError(f"--attach {attach}: a layer goes only into the root whose layers it was computed from ({read}); "
                          f"attached to another take it would be stale there at once. Run the step on {attach} instead")
