@@ -1,4 +1,4 @@
-"""`synth` on a Dask cluster: one task per take, the same corpus whatever the worker count.
+"""`simulate` on a Dask cluster: one task per take, the same corpus whatever the worker count.
 
 Each task simulates one take (seeded by its TakeSpec, so no result depends on which worker
 ran it or when) and writes it with facedyn.usd.corpus.write_simulated_take; the index lists
@@ -39,7 +39,7 @@ def build_corpus_on(client, output: Path, rig: FaceRig, specs: list[TakeSpec], t
     started = time.perf_counter()
     shared_rig = client.scatter(rig, broadcast=True)
     batch = uuid.uuid4().hex[:8]
-    futures = [client.submit(simulate_and_write, output / spec.name, shared_rig, spec, tissue, key=f"synth-{spec.name}-{batch}",
+    futures = [client.submit(simulate_and_write, output / spec.name, shared_rig, spec, tissue, key=f"simulate-{spec.name}-{batch}",
                              pure=False, retries=RETRIES) for spec in specs]
     progress.start(f"simulate {len(specs)} takes", len(specs))
     for _ in as_completed(futures):

@@ -1,4 +1,4 @@
-"""`usdfacedyn batch` and `synth` on a local Dask cluster of 2 worker processes, on small
+"""`usdfacedyn batch` and `simulate` on a local Dask cluster of 2 worker processes, on small
 simulated takes of the built-in face (a few seconds each)."""
 from __future__ import annotations
 
