@@ -84,6 +84,7 @@ def write_simulated_take(folder: Path, take: SimulatedPerformance, rig: FaceRig)
         "frames": int(len(frames)),
         "fps": take.fps,
         "spec": spec,
+        "substeps": int(take.info.get("substeps", 1)),  # steps per frame the physics took (more where it had to retry)
         "peak_offset_mm": round(float(magnitude.max()) * 10, 3),
         "rms_offset_mm": round(float(np.sqrt(np.mean(face_magnitude**2))) * 10, 3),
     }
