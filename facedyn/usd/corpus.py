@@ -121,33 +121,49 @@ def build_corpus(
     progress = progress or Progress.silent()
     output = corpus_folder(output)
     started = time.perf_counter()
-    rig_hash = rig_fingerprint(rig)
-    recipes = {spec.name: take_recipe(spec, rig_hash, tissue) for spec in specs}
-    sweep_partial_takes(output)
-    done = {spec.name: entry for spec in specs if (entry := complete_take(output / spec.name, recipes[spec.name])) is not None}
-    resumed = len(done)
-    errors: dict[str, str] = {}
-    written = 0.0
+    corpus = ResumedCorpus(output, rig, specs, tissue)
     progress.start(f"simulate {len(specs)} takes", len(specs))
-    if resumed:
-        progress.note(f"{output}: {resumed} of {len(specs)} takes already complete, kept")
-        progress.advance(resumed)
-    for spec, take, error in simulate_each(rig, [s for s in specs if s.name not in done], tissue, jobs):
+    if corpus.resumed:
+        progress.note(f"{output}: {corpus.resumed} of {len(specs)} takes already complete, kept")
+        progress.advance(corpus.resumed)
+    for spec, take, error in simulate_each(rig, corpus.missing(), tissue, jobs):
         if error is not None:
-            errors[spec.name] = error
+            corpus.errors[spec.name] = error
             progress.note(f"take {spec.name} skipped: {error}")
         else:
             t0 = time.perf_counter()
-            done[spec.name] = write_take_atomically(output, take, rig, recipes[spec.name])
-            written += time.perf_counter() - t0
+            corpus.done[spec.name] = write_take_atomically(output, take, rig, corpus.recipes[spec.name])
+            corpus.written += time.perf_counter() - t0
         progress.advance()
     progress.finish()
-    failed = [{"name": spec.name, "error": errors[spec.name]} for spec in specs if spec.name in errors]
-    if specs and not done:
-        raise FacedynError(f"{output}: no take could be simulated; {failed[0]['name']}: {failed[0]['error']}")
-    takes = [done[spec.name] for spec in specs if spec.name in done]
-    return write_corpus_index(output, rig, tissue, takes, description, jobs, written, time.perf_counter() - started,
-                              failed=failed, resumed=resumed)
+    return corpus.write_index(description, jobs, time.perf_counter() - started)
+
+
+class ResumedCorpus:
+    """A corpus folder's takes for `specs`: their recipes, the ones complete (kept from an earlier run, or
+    written now: `done`, name -> corpus entry) and the ones that failed (`errors`, name -> message)."""
+
+    def __init__(self, output: Path, rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | None):
+        self.output, self.rig, self.specs, self.tissue = output, rig, specs, tissue
+        rig_hash = rig_fingerprint(rig)
+        self.recipes = {spec.name: take_recipe(spec, rig_hash, tissue) for spec in specs}
+        sweep_partial_takes(output)
+        self.done = {spec.name: entry for spec in specs if (entry := complete_take(output / spec.name, self.recipes[spec.name])) is not None}
+        self.resumed = len(self.done)
+        self.errors: dict[str, str] = {}
+        self.written = 0.0  # seconds spent writing takes
+
+    def missing(self) -> list[TakeSpec]:
+        return [spec for spec in self.specs if spec.name not in self.done]
+
+    def write_index(self, description: dict | None, jobs: int, total: float) -> dict:
+        """corpus.json for the takes in the specs' order; a FacedynError when none of them could be simulated."""
+        failed = [{"name": spec.name, "error": self.errors[spec.name]} for spec in self.specs if spec.name in self.errors]
+        if self.specs and not self.done:
+            raise FacedynError(f"{self.output}: no take could be simulated; {failed[0]['name']}: {failed[0]['error']}")
+        takes = [self.done[spec.name] for spec in self.specs if spec.name in self.done]
+        return write_corpus_index(self.output, self.rig, self.tissue, takes, description, jobs, self.written, total,
+                                  failed=failed, resumed=self.resumed)
 
 
 def rig_fingerprint(rig: FaceRig) -> str:
