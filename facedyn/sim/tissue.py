@@ -138,6 +138,7 @@ def substep_ladder(first: int, finest: int = MAX_SUBSTEPS) -> list[int]:
         ladder.append(ladder[-1] * 2)
     return ladder
 
+
 SOFT_HZ = (5.0, 9.0)  # the training family's soft tissue frequencies (TissueParams.random)
 
 
