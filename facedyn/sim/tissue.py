@@ -50,7 +50,10 @@ vertices for x, y and z alike when the springs are isotropic, one of all 3n coor
 when normal_ratio > 1). The expression-dependent
 part of K and the u-dependent fictitious loads enter the right-hand side at stage values
 predicted from the previous step; the matrix is refactorized only when the stiffness drift
-would change its diagonal by more than `refactor_tolerance` (relative). A still skull
+would change its diagonal by more than `refactor_tolerance` (relative), or when the
+stiffness left explicit would break the explicit part's stability bound (h^2 k above
+EXPLICIT_LIMIT: a Live Link curve that never quite holds still kept a correction below the
+tolerance for seconds, and it grew to metres on springs stiff along the normal). A still skull
 gives a zero right-hand side, hence exactly zero offsets. Those explicit parts can feed a
 stiff mode that Gauss-Legendre does not damp; a take whose offsets leave the face's size
 is stopped at that frame and integrated again at twice the steps per frame
@@ -121,6 +124,14 @@ class _Diverged(Exception):
         self.frame = frame
 
 
+# The stability bound of the explicit gain-drift correction: the stiffness it adds, per unit
+# mass along the spring's stiffest direction, times h^2, must stay below this. Above it the
+# correction at predicted stages feeds back into the next step (explicit stiffness is stable
+# only while h^2 k is of order one) and, on springs stiff along the normal (160-200 Hz), a
+# correction that lasts, as a Live Link curve's small ceaseless changes keep it, grows
+# without bound. 1 keeps the built-in face's dialog takes at their factorization count
+# (163 on apfel under walking) or a few more (33 -> 43 on alex_rom_4 standing still).
+EXPLICIT_LIMIT = 1.0
 MAX_SUBSTEPS = 16  # the finest step a diverging take is retried at, per frame (1/1920 s at 120 fps)
 
 
@@ -498,6 +509,7 @@ class _Tissue:
         self.h = h
         self.mu = h * _GL_LAMBDA
         self.tolerance = params.refactor_tolerance
+        self.explicit_weight = h * h * self.spring * (1.0 + self.directions.extra)  # h^2 k per unit gain drift (EXPLICIT_LIMIT)
         self.inertia = params.expression_inertia
 
     def gravity_sag(self, gain: np.ndarray, turned: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
@@ -672,8 +684,11 @@ class _Tissue:
                 change = gain[f + 1, free] - g_now
                 reach = np.abs(g_now - gain_ref) + frac[step].max() * np.abs(change)
                 drift = float(np.max(sensitivity * reach))
-                # a held expression's lasting correction grows on springs stiffer along the normal: refactorize once
-                if drift > self.tolerance or (drift > 0 and self.directions.normals is not None and not moving[f]):
+                explicit = float(np.max(self.explicit_weight * reach))
+                # refactorize for accuracy (drift), for stability (explicit), and once for a held expression, whose lasting
+                # correction grows on springs stiffer along the normal
+                if (drift > self.tolerance or explicit > EXPLICIT_LIMIT
+                        or (drift > 0 and self.directions.normals is not None and not moving[f])):
                     gain_ref = g_now + frac[step].mean() * change
                     lu, stiffness, sensitivity = self._factorize(gain_ref)
                     factorizations += 1
