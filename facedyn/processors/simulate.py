@@ -72,7 +72,8 @@ class SimulateProcessor(Processor):
                        "noise_cm": params["noise"], "seed": params["seed"], "physics": params["physics"],
                        "randomize_tissue": params["randomize_tissue"], "extra_motions": params["extra_motions"],
                        "impacts": params["impacts"], "soft_hz": params["soft_hz"] or "the family's"}
-        index = build_corpus(request.output, rig, specs, progress=progress, description=description, jobs=params["jobs"])
+        index = build_corpus(request.output, rig, specs, progress=progress, description=description, jobs=params["jobs"],
+                             other_recipes="refuse")  # a folder of another corpus is never overwritten from the command line
         return FolderOutput({"takes": len(index["takes"]), "failed": [take["name"] for take in index["failed"]],
                              "resumed": index["resumed"], "frames": index["frames"], "points": index["points"],
                              "simulated_frames_per_second": index["simulated_frames_per_second"], "jobs": params["jobs"]})

@@ -110,18 +110,21 @@ def build_corpus(
     progress: Progress | None = None,
     description: dict | None = None,
     jobs: int = 1,
+    *,
+    other_recipes: str = "redo",
 ) -> dict:
     """Simulate (`jobs` takes at a time) and write every take of `specs`; return the corpus index.
 
     Takes already complete in `output` with the same recipe are kept (an interrupted corpus
-    resumes); a complete take of another recipe is refused (FacedynError). A take the
+    resumes); a complete take of another recipe is simulated again (`other_recipes`
+    'redo') or refused ('refuse': a FacedynError naming what differs). A take the
     simulator cannot integrate is reported, skipped and listed under `failed`: the others
     go on, and the corpus is written when at least one take is.
     """
     progress = progress or Progress.silent()
     output = corpus_folder(output)
     started = time.perf_counter()
-    corpus = ResumedCorpus(output, rig, specs, tissue)
+    corpus = ResumedCorpus(output, rig, specs, tissue, other_recipes)
     progress.start(f"simulate {len(specs)} takes", len(specs))
     if corpus.resumed:
         progress.note(f"{output}: {corpus.resumed} of {len(specs)} takes already complete, kept")
@@ -143,12 +146,16 @@ class ResumedCorpus:
     """A corpus folder's takes for `specs`: their recipes, the ones complete (kept from an earlier run, or
     written now: `done`, name -> corpus entry) and the ones that failed (`errors`, name -> message)."""
 
-    def __init__(self, output: Path, rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | None):
+    def __init__(self, output: Path, rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | None, other_recipes: str = "redo"):
+        if other_recipes not in ("redo", "refuse"):
+            raise ValueError(f"other_recipes must be 'redo' or 'refuse', got {other_recipes!r}")
         self.output, self.rig, self.specs, self.tissue = output, rig, specs, tissue
         rig_hash = rig_fingerprint(rig)
         self.recipes = {spec.name: take_recipe(spec, rig_hash, tissue) for spec in specs}
         sweep_partial_takes(output)
-        self.done = {spec.name: entry for spec in specs if (entry := complete_take(output / spec.name, self.recipes[spec.name])) is not None}
+        refuse = other_recipes == "refuse"
+        self.done = {spec.name: entry for spec in specs
+                     if (entry := complete_take(output / spec.name, self.recipes[spec.name], refuse)) is not None}
         self.resumed = len(self.done)
         self.errors: dict[str, str] = {}
         self.written = 0.0  # seconds spent writing takes
@@ -201,11 +208,12 @@ def _file_key(path: str) -> str:
         return path  # unreadable: the simulation will say so
 
 
-def complete_take(folder: Path, recipe: dict) -> dict | None:
+def complete_take(folder: Path, recipe: dict, refuse: bool = True) -> dict | None:
     """The corpus entry of a complete take of this recipe in `folder`; None when there is none to keep.
 
-    A take folder of another recipe is a FacedynError naming what differs (refused, not
-    overwritten); a folder without a recipe (an older facedyn's take) is simulated again.
+    A take folder of another recipe is a FacedynError naming what differs (`refuse`: not
+    overwritten) or None (simulated again); so is a folder without a recipe (an older
+    facedyn's take, simulated again).
     """
     marker = folder / TAKE_RECIPE
     if not marker.is_file():
@@ -216,6 +224,8 @@ def complete_take(folder: Path, recipe: dict) -> dict | None:
         entry = kept["entry"]
     except (OSError, ValueError, KeyError, TypeError):
         raise FacedynError(f"{marker}: unreadable; delete {folder} to simulate the take again") from None
+    if not ok and not refuse:
+        return None
     if not ok:
         differs = _differences(kept["recipe"], recipe)
         raise FacedynError(f"{folder}: a take simulated with another recipe (it differs in {differs or 'the simulator'}); write the corpus "
@@ -240,7 +250,7 @@ def write_take_atomically(output: Path, take: SimulatedPerformance, rig: FaceRig
         entry["folder"] = name
         (partial / TAKE_RECIPE).write_text(json.dumps({"recipe": recipe, "entry": entry}, indent=2, default=str))
         final = output / name
-        if final.exists():  # an older facedyn's take (complete_take found no recipe): replaced
+        if final.exists():  # a take of another recipe, or an older facedyn's (complete_take kept neither): replaced
             shutil.rmtree(final)
         partial.rename(final)
     except BaseException:

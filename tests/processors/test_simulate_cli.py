@@ -40,6 +40,9 @@ def test_the_old_name_runs_the_same_command_with_a_deprecation_note(tmp_path, ca
     assert "deprecated" not in capsys.readouterr().err
     index = json.loads((tmp_path / "old" / "corpus.json").read_text())
     assert index["resumed"] == 1 and [t["name"] for t in index["takes"]] == ["smile_still"]  # the same recipe: kept
+    assert cli("simulate", "-o", tmp_path / "old", "--scale", "demo", "--only", "smile_still", "--seed", "5") == 1
+    assert "smile_still: a take simulated with another recipe (it differs in spec.seed)" in capsys.readouterr().err
+    assert json.loads((tmp_path / "old" / "corpus.json").read_text()) == index  # refused: the corpus as it was
 
 
 class Interrupted(Processor):

@@ -54,15 +54,18 @@ def test_the_same_data_by_another_path_is_the_same_recipe(tmp_path, rig, shared_
     assert build_corpus(tmp_path / "c", rig, [replace(spec, dialog=str(tmp_path / ".." / tmp_path.name / "elsewhere.csv"))])["resumed"] == 1
 
 
-def test_a_complete_take_of_another_recipe_is_refused_not_overwritten(tmp_path, rig):
+def test_a_complete_take_of_another_recipe_is_refused_or_redone(tmp_path, rig):
     out = tmp_path / "corpus"
     build_corpus(out, rig, specs()[:1])
     kept = stamp(out / "a_walk" / "capture.usdc")
     with pytest.raises(FacedynError, match=r"a_walk: a take simulated with another recipe \(it differs in spec.seed\)"):
-        build_corpus(out, rig, [replace(specs()[0], seed=9)])
+        build_corpus(out, rig, [replace(specs()[0], seed=9)], other_recipes="refuse")
     with pytest.raises(FacedynError, match="differs in rig"):
-        build_corpus(out, default_face(resolution=11), specs()[:1])
+        build_corpus(out, default_face(resolution=11), specs()[:1], other_recipes="refuse")
     assert stamp(out / "a_walk" / "capture.usdc") == kept
+    redone = build_corpus(out, rig, [replace(specs()[0], seed=9)])  # the default: simulated again, replaced
+    assert redone["resumed"] == 0 and redone["takes"][0]["spec"]["seed"] == 9
+    assert json.loads((out / "a_walk" / TAKE_RECIPE).read_text())["recipe"]["spec"]["seed"] == 9
 
 
 def test_a_take_folder_without_a_recipe_is_simulated_again(tmp_path, rig):
