@@ -80,7 +80,7 @@ class SimulateProcessor(Processor):
 
 
 class SynthAliasProcessor(SimulateProcessor):
-    """`synth`, the old name of `simulate` (issue 38: it sounded like `synthesize`): the same command, with a note."""
+    """`synth`, the old name of `simulate` (it sounded like `synthesize`): the same command, with a note."""
 
     name = "synth"
     summary = "deprecated alias of `simulate`"
