@@ -1,8 +1,8 @@
 """The cross-simulator protocol (issue 18): train on facedyn's simulator, test on another physics.
 
 Training, all through the console as a studio runs it (the built-in face, written as a
-UsdSkel rig so that `synth --rig` and `actor --from rig` read the same file):
-  usdfacedyn synth --rig rig.usda --scale demo --randomize-tissue take --extra-motions --impacts --noise 0.01 --data DATA
+UsdSkel rig so that `simulate --rig` and `actor --from rig` read the same file):
+  usdfacedyn simulate --rig rig.usda --scale demo --randomize-tissue take --extra-motions --impacts --noise 0.01 --data DATA
   usdfacedyn actor rig.usda                          (the actor frame: the rig's own space)
   usdfacedyn train-removal   (three F variants, equal budgets: --epochs/--subsample below)
       F_truth_acc: true dynamics, landmark accelerations over t-30..t+10, sample positions,
@@ -45,7 +45,7 @@ that leaves the least of the session's motion beyond its held shapes and sag (`e
 --session --removal M [--blend N]`, the response's own takes each removed by the response
 fitted without them; no truth).
 Tissue band (`--soft-hz-bands`, default 5-6.5 and 7.5-9 Hz): the recommended F is trained
-once more per band, each on its own corpus (`synth ... --soft-hz BAND`: the same protocol and
+once more per band, each on its own corpus (`simulate ... --soft-hz BAND`: the same protocol and
 seeds, the tissue's soft frequency drawn from the band; the same budget), and each test actor
 keeps the candidate (the family's F or a band's) that leaves its held expressions most alike
 across motions on its calibration session (`evaluate --held-expression --removal F` on the
@@ -75,7 +75,7 @@ on the solved take. One JSON object per case.
     .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--held-out-actors 0] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--session-seconds 4.5] [--work DIR]
 
 A small-budget protocol (demo-scale corpus with the procedural talking takes, no Live Link
-performances, short takes, few epochs). Measured on 2 cores: `synth` 106 s (under a load of
+performances, short takes, few epochs). Measured on 2 cores: `simulate` 106 s (under a load of
 3-5), the four models 3.3 minutes, each test actor 5-11 minutes with its calibration.
 """
 from __future__ import annotations
@@ -109,7 +109,7 @@ DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TRACKER = TrackerNoise(iid_cm=0.01, temporal_cm=0.004, spatial_cm=0.002, pop_rate=1.0, pop_cm=0.3, drop_rate=0.01)
 ACTOR_SEEDS = (1801, 1802, 1803, 1804)  # VolumetricParams.random seeds: no training take draws volumetric tissue
 HELD_OUT_SEEDS = (1901, 1902, 1903, 1904)  # never simulated while the training family was tuned (final figures only)
-SOFT_HZ_BANDS = ("5-6.5", "7.5-9")  # synth --soft-hz: the family's low and high ends, beside the whole 5-9 Hz
+SOFT_HZ_BANDS = ("5-6.5", "7.5-9")  # simulate --soft-hz: the family's low and high ends, beside the whole 5-9 Hz
 TEST_SPEECH_TAKES = "dialog_walk,dialog_hop"  # the corpus's Live Link takes of the test takes' speech
 RECOMMENDED_INPUTS = ("--sample-positions", "true", "--batch-size", "2000", "--exclude", TEST_SPEECH_TAKES)
 F_VARIANTS = {  # name: (train-removal --target, --skull-features, its other flags)
@@ -157,7 +157,7 @@ def train(work: Path, rig_path: Path, args) -> dict:
         usdfacedyn(*command)
         seconds[name] = round(time.perf_counter() - t0, 1)
 
-    step("synth", "synth", "-o", str(work / "corpus"), *corpus_flags(rig_path, args))
+    step("simulate", "simulate", "-o", str(work / "corpus"), *corpus_flags(rig_path, args))
     step("actor", "actor", str(rig_path), "-o", str(work / "actor.usda"))
     for name, (target, features, flags) in F_VARIANTS.items():
         step(name, "train-removal", str(work / "corpus"), "-o", str(work / f"{name}.removal"), "--target", target,
@@ -193,7 +193,7 @@ def train_bands(work: Path, rig_path: Path, args) -> dict:
         if band_model(work, band).is_file():
             continue
         t0 = time.perf_counter()
-        usdfacedyn("synth", "-o", str(work / f"corpus_soft{band}"), *corpus_flags(rig_path, args), "--soft-hz", band)
+        usdfacedyn("simulate", "-o", str(work / f"corpus_soft{band}"), *corpus_flags(rig_path, args), "--soft-hz", band)
         target, features, flags = F_VARIANTS[RECOMMENDED]
         usdfacedyn("train-removal", str(work / f"corpus_soft{band}"), "-o", str(band_model(work, band)), "--target", target,
                    "--skull-features", features, *flags, *f_budget(args))
@@ -466,7 +466,7 @@ def main() -> None:
     parser.add_argument("--session-seconds", type=float, default=SESSION_SECONDS, help="length of each calibration take (nine "
                         "held expressions: a 40 s session by default)")
     parser.add_argument("--soft-hz-bands", type=lambda text: [b for b in text.split(",") if b], default=list(SOFT_HZ_BANDS),
-                        help="comma-separated synth --soft-hz bands: the recommended F trained once more per band, one of "
+                        help="comma-separated simulate --soft-hz bands: the recommended F trained once more per band, one of "
                         "them or the family's chosen per actor on its calibration session ('' for none)")
     parser.add_argument("--horizontal-platforms", action="store_true", help="each actor's session shakes two platforms "
                         "horizontally instead (6 Hz -> 4 Hz side to side, 1 cm; 10 Hz -> 7 Hz fore and aft, 0.4 cm)")

@@ -8,7 +8,7 @@ and of the angular acceleration power (skull axes, all three axes together, mean
 between 6 and 15 Hz, and the RMS of each. Sources: every procedural gait of facedyn.motion
 (walk, run, hop, dance, turn, jump) smooth and with foot-contact jolts (``impacts=True``),
 averaged over seeds, and the CMU clips in ../shared/data when it is there (whole clips,
-resampled to 120 fps as `synth` reads them).
+resampled to 120 fps as `simulate` reads them).
 
     python benchmarks/bench_motion_spectrum.py [--seconds 6] [--seeds 4]
 """

@@ -1,7 +1,7 @@
 """Peak memory of training F and H on corpora of N and 4N takes: flat, whatever the corpus size.
 
 Simulates a corpus of --takes * 4 walking / hopping / platform takes of the built-in face
-(--seconds each, 120 fps; `usdfacedyn synth`'s USD layout), then trains in a fresh
+(--seconds each, 120 fps; `usdfacedyn simulate`'s USD layout), then trains in a fresh
 subprocess per case, reading the takes lazily from USD one at a time (a generator of
 TrainingSequence objects, true skull and true dynamics; H reads the true quasistatic shapes through a
 lazy mapping) into the on-disk store, with at most --resident-mib of examples in memory.

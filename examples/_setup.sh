@@ -53,7 +53,7 @@ ensure_corpus() {
         return
     fi
     step "simulate a small corpus with known truth (demo protocol, takes '$TAKES_GLOB')"
-    fd synth --scale demo --only "$TAKES_GLOB" -o "$CORPUS"
+    fd simulate --scale demo --only "$TAKES_GLOB" -o "$CORPUS"
 }
 
 # ensure_stabilized TAKE_DIR: stabilized.usdc (mode pursuit) attached to the take.

@@ -75,7 +75,7 @@ class Demo:
         return value
 
     def run(self) -> dict:
-        from facedyn.processors.synth import load_rig
+        from facedyn.processors.simulate import load_rig
         from facedyn.sim.corpus import TakeSpec, protocol, simulate_take
         from facedyn.usd.corpus import build_corpus, write_simulated_take
 
@@ -265,7 +265,10 @@ class DemoProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
+        from facedyn.sim.corpus import check_data_folder
+
         params = request.params
+        check_data_folder(params["data"], SCALES[params["scale"]]["corpus"])
         return Plan({"scale": params["scale"], "rig": str(params["rig"] or "built-in"), "output": str(request.output)}, request)
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:

@@ -36,6 +36,15 @@ class Progress:
         self._done = min(self._done + steps, self._total)
         self._draw()
 
+    def note(self, message: str) -> None:
+        """A line of its own (a skipped item, a resumed task) without losing the bar."""
+        if not self.enabled:
+            return
+        self.stream.write(("\r\x1b[K" if self.interactive else "") + message + "\n")
+        self.stream.flush()
+        if self.interactive:
+            self._draw()
+
     def finish(self) -> None:
         self._done = self._total
         self._draw()

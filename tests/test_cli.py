@@ -184,7 +184,7 @@ def test_version_list_env(capsys):
     assert exc.value.code == 0 and "usdfacedyn" in capsys.readouterr().out
     code, out, _ = run(["list"], capsys)
     listed = [line.split()[0] for line in out.splitlines()]
-    assert code == 0 and {"import", "stabilize", "remove", "synthesize", "retarget", "preview", "synth", "train-removal",
+    assert code == 0 and {"import", "stabilize", "remove", "synthesize", "retarget", "preview", "simulate", "synth", "train-removal",
                           "train-synthesis", "demo"} <= set(listed)
     code, out, _ = run(["env"], capsys)
     assert code == 0 and out.startswith("export PXR_PLUGINPATH_NAME=")

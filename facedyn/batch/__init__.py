@@ -1,4 +1,4 @@
-"""Batches of takes on a Dask cluster: `usdfacedyn batch` and `synth` with one task per take.
+"""Batches of takes on a Dask cluster: `usdfacedyn batch` and `simulate` with one task per take.
 
 A batch runs facedyn's own commands (import, stabilize, remove, synthesize, preview) for
 many captures, one Dask task per (take, step) chained along the steps, on an embedded local

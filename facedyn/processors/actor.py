@@ -2,7 +2,7 @@
 
 Three ways, by what the studio has:
 - `--from rig`: a UsdSkel blend-shape rig (its neutral, rigid and face vertex sets, eye
-  corners). The actor lives in the rig's own space, so networks trained on `synth --rig`
+  corners). The actor lives in the rig's own space, so networks trained on `simulate --rig`
   of that rig apply to the actor's takes unchanged.
 - `--from neutral`: one neutral capture or scan (a USD mesh, its first time sample, or a
   take's first frame): the neutral defines the skull frame; the rigid region is unknown.

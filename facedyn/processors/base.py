@@ -130,6 +130,9 @@ class Writes:
     metavar: str = "LAYER"
     help: str = ""
     default: str | None = None  # a default output (else -o is required)
+    # a folder filled one complete part at a time (a corpus's takes): a failed or interrupted run keeps the parts it
+    # completed, and the next run on the folder resumes from them
+    resumable: bool = False
 
 
 @dataclass

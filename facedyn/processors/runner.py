@@ -4,7 +4,8 @@ What happens to the output depends only on what the processor declares it writes
 - a layer is written with its role and provenance and, with `--attach` (or an import's
   root), placed in the take root by role, under the root's lock;
 - a file (a model, an actor asset) is saved atomically by the function the processor returns;
-- a folder is removed again when the run fails and the folder did not exist before.
+- a folder is removed again when the run fails and the folder did not exist before, unless
+  the processor declares it resumable and it holds parts the run completed (kept for the next run).
 Missing folders of the output are created (and removed again if the run fails).
 """
 from __future__ import annotations
@@ -55,7 +56,8 @@ def execute(processor: Processor, request: Request, progress: Progress, dry_run:
         elif not isinstance(output, FolderOutput):
             raise TypeError(f"{processor.name}.run returned {type(output).__name__}, not a declared output")
     except BaseException:
-        if created_folder and request.output.is_dir():
+        kept = processor.writes.resumable and request.output.is_dir() and any(request.output.iterdir())
+        if created_folder and request.output.is_dir() and not kept:
             shutil.rmtree(request.output, ignore_errors=True)
         for folder in reversed(made):  # the output's missing folders, made for this run
             if folder.is_dir() and not any(folder.iterdir()):

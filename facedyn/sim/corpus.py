@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from facedyn.errors import FacedynError, UsageError
 from facedyn.geometry import quaternion
 from facedyn import motion
 from facedyn.sim.rig import FaceRig
@@ -43,7 +44,8 @@ PHYSICS = {"tissue": TissueParams, "volumetric": VolumetricParams}  # protocol(p
 RANDOMIZE = ("take", "corpus")
 
 # Held expressions as shape-weight recipes, tried in order; a rig gets the first ten whose
-# shapes it has (ICT-FaceKit and the built-in face both use ARKit-style names).
+# shapes it has (ICT-FaceKit and the built-in face name them eyeBlink_L; ARKit rigs
+# eyeBlinkLeft, and one browInnerUp and cheekPuff for both sides: `rig_recipe`).
 HELD_EXPRESSIONS: dict[str, dict[str, float]] = {
     "jaw_open": {"jawOpen": 0.8},
     "smile": {"mouthSmile_L": 0.9, "mouthSmile_R": 0.9},
@@ -137,16 +139,37 @@ def expression_weights(rig: FaceRig, spec: TakeSpec, frame_count: int) -> np.nda
         start = int(np.random.default_rng(spec.seed).integers(0, max(available - frame_count, 0) + 1))
         rows = np.minimum(np.arange(start, start + frame_count), available - 1)  # hold the last pose if short
         columns = [rig.shape_index(name) for name in curves.names]
-        weights[:, columns] = curves.weights[rows]
+        weights[:, columns] = limit_rate(curves.weights[rows], spec.fps)
         return weights
     if spec.expression is not None:
-        recipe = HELD_EXPRESSIONS[spec.expression]
+        recipe = rig_recipe(rig.expression_names, HELD_EXPRESSIONS[spec.expression]) or {}
         ease = np.clip(np.arange(frame_count) / (0.3 * spec.fps), 0.0, 1.0)
         ease = ease * ease * (3 - 2 * ease)
         for shape, value in recipe.items():
-            if shape in rig.expression_names:
-                weights[:, rig.shape_index(shape)] = value * ease
+            weights[:, rig.shape_index(shape)] = value * ease
     return weights
+
+
+# The fastest a face moves, in expression weight per second. A blink, the fastest facial
+# action, closes the lid in about 75-100 ms, its fastest part at about twice its mean speed;
+# speech moves lips and jaw slower. So no weight of a face crosses its 0..1 range much
+# faster than in 1/30 s: a Live Link curve that does is a tracking jump (a lost frame, a
+# re-acquired face), not a face. The shared Live Link takes peak at 27/s (blinks at 60 fps),
+# 13-16/s at 30 fps, so real performances pass unchanged.
+MAX_WEIGHT_RATE = 30.0
+
+
+def limit_rate(weights: np.ndarray, fps: float, rate: float = MAX_WEIGHT_RATE) -> np.ndarray:
+    """(F, K) weights whose frame-to-frame change is at most `rate` / fps (a slew limiter:
+    a jump becomes a ramp at the bound, anything slower is kept exactly)."""
+    out = np.array(weights, dtype=np.float32)
+    step = np.float32(rate / fps)
+    change = np.diff(out, axis=0)
+    if np.all(np.abs(change) <= step):
+        return out
+    for f in range(1, len(out)):
+        out[f] = out[f - 1] + np.clip(weights[f] - out[f - 1], -step, step)
+    return out
 
 
 def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | VolumetricParams | None = None) -> SimulatedPerformance:
@@ -176,7 +199,7 @@ def simulate_take(rig: FaceRig, spec: TakeSpec, tissue: TissueParams | Volumetri
         offsets=result.dynamics.astype(np.float32),
         weights=weights,
         info={"motion": spec.motion, "expression": spec.expression, "dialog": spec.dialog and Path(spec.dialog).name, "speech": spec.speech,
-              "physics": physics.__name__.rsplit(".", 1)[-1]},
+              "physics": physics.__name__.rsplit(".", 1)[-1], "substeps": getattr(result, "substeps", params.substeps)},
     )
 
 
@@ -191,6 +214,39 @@ def _init_worker(rig: FaceRig, tissue: TissueParams | VolumetricParams | None) -
 def _simulate_in_worker(spec: TakeSpec) -> SimulatedPerformance:
     rig, tissue = _worker_setup
     return simulate_take(rig, spec, tissue)
+
+
+def _simulate_caught(rig: FaceRig, spec: TakeSpec, tissue) -> tuple[TakeSpec, SimulatedPerformance | None, str | None]:
+    """(spec, take, None), or (spec, None, the error) when the take's input or physics fails (a FacedynError)."""
+    try:
+        return spec, simulate_take(rig, spec, tissue), None
+    except FacedynError as exc:
+        return spec, None, str(exc).removeprefix(f"take {spec.name}: ")
+
+
+def _simulate_caught_in_worker(spec: TakeSpec):
+    rig, tissue = _worker_setup
+    return _simulate_caught(rig, spec, tissue)
+
+
+def simulate_each(rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | VolumetricParams | None = None, jobs: int = 1):
+    """(spec, take, error) for every spec, as each finishes (`jobs` at a time in worker processes):
+    a take that fails (a FacedynError: it diverged, its data cannot be read) comes back as
+    its error, and the others go on. Interrupted, no queued take is started."""
+    if jobs <= 1 or len(specs) <= 1:
+        for spec in specs:
+            yield _simulate_caught(rig, spec, tissue)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    context = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(specs)), mp_context=context, initializer=_init_worker, initargs=(rig, tissue))
+    try:
+        for future in as_completed([pool.submit(_simulate_caught_in_worker, spec) for spec in specs]):
+            yield future.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def simulate_takes(rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | VolumetricParams | None = None, jobs: int = 1):
@@ -212,10 +268,25 @@ def simulate_takes(rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | V
 
 
 def held_expressions(rig: FaceRig, count: int = 10) -> list[str]:
-    """The first `count` HELD_EXPRESSIONS whose shapes the rig has (all of them)."""
-    names = set(rig.expression_names)
-    usable = [key for key, recipe in HELD_EXPRESSIONS.items() if set(recipe) <= names]
-    return usable[:count]
+    """The first `count` HELD_EXPRESSIONS whose shapes the rig has (all of them, by any of their names)."""
+    return [key for key, recipe in HELD_EXPRESSIONS.items() if rig_recipe(rig.expression_names, recipe) is not None][:count]
+
+
+def rig_recipe(names, recipe: dict[str, float]) -> dict[str, float] | None:
+    """A recipe in the rig's shape names: mouthSmile_L as mouthSmile_L or mouthSmileLeft (ARKit), a
+    side of a shape the rig does not split (ARKit's browInnerUp, cheekPuff) as that shape; None
+    when the rig lacks one."""
+    names = set(names)
+    weights: dict[str, float] = {}
+    for shape, value in recipe.items():
+        candidates = [shape]
+        if shape.endswith(("_L", "_R")):
+            candidates += [shape[:-2] + ("Left" if shape.endswith("_L") else "Right"), shape[:-2]]
+        found = next((name for name in candidates if name in names), None)
+        if found is None:
+            return None
+        weights[found] = max(weights.get(found, 0.0), value)
+    return weights
 
 
 def protocol(
@@ -233,8 +304,9 @@ def protocol(
 ) -> list[TakeSpec]:
     """The capture protocol at a scale: 'standard' (the paper's) or 'demo' (a quick subset).
 
-    Dialog takes need the Live Link curves and CMU mocap in `data_dir` (../shared/data);
-    without it they use procedural walking and hopping and stay out when no curves exist.
+    Dialog takes need the Live Link curves and CMU mocap in `data_dir` (../shared/data; a
+    folder without them is an error, `check_data_folder`); without a data folder there are
+    none (the procedural speech takes stay).
     `physics` ('tissue' or 'volumetric') and `randomize_tissue` set each take's physics:
     None keeps the corpus's (TissueParams() unless the caller passes one; 'volumetric'
     gives every take VolumetricParams()), 'corpus' draws one random actor from `seed`,
@@ -249,6 +321,7 @@ def protocol(
         raise ValueError(f"physics must be one of {', '.join(PHYSICS)}, got {physics!r}")
     if randomize_tissue not in (None,) + RANDOMIZE:
         raise ValueError(f"randomize_tissue must be None, 'take' or 'corpus', got {randomize_tissue!r}")
+    check_data_folder(data_dir, scale, "data_dir")
     specs = _protocol_takes(rig, scale, data_dir, seed, noise_cm, extra_motions)
     if impacts:
         specs = [replace(spec, impacts=True) for spec in specs]
@@ -305,16 +378,41 @@ def speech_takes(motions, duration_s: float, seed: int, noise_cm: float) -> list
             for i, kind in enumerate(motions)]
 
 
+DIALOG_MOCAP = {"walk": "131_01.bvh", "hop": "131_03.bvh"}  # CMU subject 131, the dialog takes' head motion
+
+
+def data_files(scale: str) -> list[str]:
+    """The files, relative to a --data folder, that the protocol at `scale` reads."""
+    files = [f"livelink-face/{SPEECH}"] + [f"cmu-mocap/{name}" for name in DIALOG_MOCAP.values()]
+    return files + ([f"livelink-face/{csv}" for csv in PERFORMANCES] if scale == "standard" else [])
+
+
+def check_data_folder(data_dir: Path | None, scale: str, flag: str = "--data") -> None:
+    """A UsageError unless `data_dir` (when given) is a folder holding every file the protocol
+    reads from it: a mistyped folder must not quietly give a corpus without its dialog takes."""
+    if data_dir is None:
+        return
+    data_dir = Path(data_dir)
+    expected = "livelink-face/ (Live Link Face CSVs) and cmu-mocap/ (CMU BVH files), as ../shared/data"
+    if not data_dir.is_dir():
+        raise UsageError(f"{flag} {data_dir}: {'not a folder' if data_dir.exists() else 'no such folder'}; expected a folder "
+                         f"holding {expected}")
+    missing = [name for name in data_files(scale) if not (data_dir / name).is_file()]
+    if missing:
+        raise UsageError(f"{flag} {data_dir}: missing {', '.join(missing)}; the {scale} protocol's dialog takes read them "
+                         f"(a folder holding {expected})")
+
+
 def dialog_takes(data_dir: Path | None, duration_s: float, seed: int, noise_cm: float) -> list[TakeSpec]:
-    """Speech under real walking and hopping head motion, when the shared data is there."""
-    if data_dir is None or not (data_dir / "livelink-face").is_dir():
+    """Speech under real walking and hopping head motion, from the shared data (none without a data folder)."""
+    if data_dir is None:
         return []
+    data_dir = Path(data_dir)
     csv = data_dir / "livelink-face" / SPEECH
     mocap = data_dir / "cmu-mocap"
-    motions = {"walk": f"bvh:{mocap / '131_01.bvh'}", "hop": f"bvh:{mocap / '131_03.bvh'}"}
     return [
-        TakeSpec(f"dialog_{name}", source, dialog=str(csv), duration_s=duration_s, seed=seed + i, noise_cm=noise_cm)
-        for i, (name, source) in enumerate(motions.items())
+        TakeSpec(f"dialog_{name}", f"bvh:{mocap / bvh}", dialog=str(csv), duration_s=duration_s, seed=seed + i, noise_cm=noise_cm)
+        for i, (name, bvh) in enumerate(DIALOG_MOCAP.items())
     ]
 
 
@@ -325,8 +423,9 @@ def performance_takes(data_dir: Path | None, motions, duration_s: float, seed: i
     Named dialog_* like the speech takes: the paper's F must not train on them (a
     performance has no moving-average target), F on true dynamics and H should.
     """
-    if data_dir is None or not (data_dir / "livelink-face").is_dir():
+    if data_dir is None:
         return []
+    data_dir = Path(data_dir)
     specs = []
     for csv in PERFORMANCES:
         for kind in motions:

@@ -50,8 +50,14 @@ vertices for x, y and z alike when the springs are isotropic, one of all 3n coor
 when normal_ratio > 1). The expression-dependent
 part of K and the u-dependent fictitious loads enter the right-hand side at stage values
 predicted from the previous step; the matrix is refactorized only when the stiffness drift
-would change its diagonal by more than `refactor_tolerance` (relative). A still skull
-gives a zero right-hand side, hence exactly zero offsets.
+would change its diagonal by more than `refactor_tolerance` (relative), or when the
+stiffness left explicit would break the explicit part's stability bound (h^2 k above
+EXPLICIT_LIMIT: a Live Link curve that never quite holds still kept a correction below the
+tolerance for seconds, and it grew to metres on springs stiff along the normal). A still skull
+gives a zero right-hand side, hence exactly zero offsets. Those explicit parts can feed a
+stiff mode that Gauss-Legendre does not damp; a take whose offsets leave the face's size
+is stopped at that frame and integrated again at twice the steps per frame
+(`substep_ladder`), so a divergence costs time, not the take.
 """
 from __future__ import annotations
 
@@ -109,6 +115,41 @@ class SimulationDiverged(FacedynError):
     """A simulation that blew up: the motion or the expression asks more of the step than it can integrate (a user's
     input, e.g. an extreme BVH, reported in one line, not a bug)."""
 
+
+class _Diverged(Exception):
+    """The integration left the face at `frame` (u beyond the face's size, or not a number): retried with smaller steps."""
+
+    def __init__(self, frame: int):
+        super().__init__(frame)
+        self.frame = frame
+
+
+# The stability bound of the explicit gain-drift correction: the stiffness it adds, per unit
+# mass along the spring's stiffest direction, times h^2, must stay below this. Above it the
+# correction at predicted stages feeds back into the next step (explicit stiffness is stable
+# only while h^2 k is of order one) and, on springs stiff along the normal (160-200 Hz), a
+# correction that lasts, as a Live Link curve's small ceaseless changes keep it, grows
+# without bound. 1 keeps the built-in face's dialog takes at their factorization count
+# (163 on apfel under walking) or a few more (33 -> 43 on alex_rom_4 standing still).
+EXPLICIT_LIMIT = 1.0
+MAX_SUBSTEPS = 16  # the finest step a diverging take is retried at, per frame (1/1920 s at 120 fps)
+
+
+def substep_ladder(first: int, finest: int = MAX_SUBSTEPS) -> list[int]:
+    """Steps per frame to try: as asked, then doubled up to `finest` (or the asked, if finer).
+
+    The explicit parts of a step (the loads on u, u' and the stiffness drift, at stages
+    predicted from the step before) are stable only while h^2 times the stiffness they
+    meet stays small; Gauss-Legendre does not damp stiff modes (|R(z)| -> 1 as z -> -inf),
+    so an error fed into one persists. Halving h quarters that product: a take that
+    diverges is simulated again at twice the steps per frame, from the start.
+    """
+    ladder = [first]
+    while ladder[-1] * 2 <= max(finest, first):
+        ladder.append(ladder[-1] * 2)
+    return ladder
+
+
 SOFT_HZ = (5.0, 9.0)  # the training family's soft tissue frequencies (TissueParams.random)
 
 
@@ -137,7 +178,7 @@ class TissueParams:
     coupling_cm: float = 1.0  # membrane coupling length: c = coupling_cm * 2 pi soft_hz
     strain_stiffening: float = 4.0  # stiffness gain per unit |strain| of the expression
     gravity_cm_s2: float = 981.0  # world gravity (-Y); 0 leaves gravity out
-    substeps: int = 1  # Gauss-Legendre steps per output frame
+    substeps: int = 1  # Gauss-Legendre steps per output frame (the first tried: a diverging take is retried finer)
     refactor_tolerance: float = 0.05  # relative change of the system's diagonal that refactorizes
     # spatial layouts (facedyn.sim.layout): log-sd of the bone springs' stiffness and of the
     # areal density over the face, drawn from layout_seed (0: uniform tissue)
@@ -245,6 +286,7 @@ class SimulationResult:
     stiffness_gain: np.ndarray  # (F, N) s_i(t) = 1 + strain_stiffening * |strain|
     attachment_hz: np.ndarray  # (N,) spring frequency of each vertex
     factorizations: int  # sparse factorizations the run needed
+    substeps: int = 1  # steps per frame the integration took (more than asked when it had to retry)
 
     @property
     def dynamics(self) -> np.ndarray:
@@ -264,6 +306,7 @@ def simulate(
     *,
     rigid_weights: np.ndarray | None = None,
     neutral: np.ndarray | None = None,
+    max_substeps: int = MAX_SUBSTEPS,
 ) -> SimulationResult:
     """Add physically simulated secondary dynamics to a quasistatic skin sequence.
 
@@ -273,7 +316,8 @@ def simulate(
     neutral (N, 3) is the unstrained shape (default rest_shapes[0]). noise_cm adds seeded
     Gaussian tracking noise (per coordinate) to ``points`` only. The tissue is at rest at
     frame 0, sagging as the rest shape says for frame 0's orientation (gravity acts as
-    it turns away from it). Float32 input gives float32 output.
+    it turns away from it). Float32 input gives float32 output. A run that diverges is
+    integrated again at twice the steps per frame, up to `max_substeps` (`substep_ladder`).
     """
     params = TissueParams() if params is None else params
     y, tri, translate, orient, weights, neutral = validate_inputs(
@@ -286,22 +330,29 @@ def simulate(
     offsets = np.zeros((frames, n, 3), dtype=dtype)
     sag = np.zeros((frames, n, 3), dtype=dtype)
     factorizations = 0
+    substeps = params.substeps
     if frames > 1 and free.size:
         skull = SkullMotion(translate, orient, fps, params.gravity_cm_s2)
-        tissue = _Tissue(neutral, tri, free, hz[free], params, 1.0 / (fps * params.substeps))
         turned = skull.gravity_change(orient)
+        limit = float(np.ptp(neutral, axis=0).max())  # a deflection beyond the face's own size is no tissue
         with single_threaded_blas():
-            factorizations = tissue.run(y, gain, skull, fps, params.substeps, offsets)
-            # a deflection beyond the face's own size (or no number at all) is no tissue: the integration diverged
-            if not max(offsets.max(), -offsets.min()) <= np.ptp(neutral, axis=0).max():  # no take-sized temporary
-                raise SimulationDiverged("the spring tissue diverged: skull accelerations or expression changes too large for the step "
-                                 "(raise substeps or lower refactor_tolerance)")
+            for substeps in substep_ladder(params.substeps, max_substeps):
+                tissue = _Tissue(neutral, tri, free, hz[free], params, 1.0 / (fps * substeps))
+                try:
+                    factorizations += tissue.run(y, gain, skull, fps, substeps, offsets, limit)
+                    break
+                except _Diverged as diverged:
+                    frame = diverged.frame
+            else:
+                raise SimulationDiverged(
+                    f"the spring tissue diverged at frame {frame} ({frame / fps:.2f} s) even at {substeps} steps per frame: the "
+                    "skull's accelerations or the expression's changes there are beyond what a face's tissue undergoes")
             if np.any(turned):
                 sag[:, free] = tissue.gravity_sag(gain[:, free], turned)
     points = y + offsets
     if noise_cm > 0:
         points += np.random.default_rng(seed).normal(0.0, noise_cm, points.shape).astype(dtype)
-    return SimulationResult(points.astype(dtype, copy=False), offsets, sag, gain, hz, factorizations)
+    return SimulationResult(points.astype(dtype, copy=False), offsets, sag, gain, hz, factorizations, substeps)
 
 
 def validate_inputs(rest_shapes, triangles, translate, orient, fps, weights, neutral, noise_cm):
@@ -458,6 +509,7 @@ class _Tissue:
         self.h = h
         self.mu = h * _GL_LAMBDA
         self.tolerance = params.refactor_tolerance
+        self.explicit_weight = h * h * self.spring * (1.0 + self.directions.extra)  # h^2 k per unit gain drift (EXPLICIT_LIMIT)
         self.inertia = params.expression_inertia
 
     def gravity_sag(self, gain: np.ndarray, turned: np.ndarray, tolerance: float = 1e-5) -> np.ndarray:
@@ -588,11 +640,12 @@ class _Tissue:
                                                   -2 * du_w[j].imag * eye]) for j in range(2)], axis=1)
         return advance, predict
 
-    def run(self, y, gain, skull: SkullMotion, fps: float, substeps: int, out: np.ndarray) -> int:
+    def run(self, y, gain, skull: SkullMotion, fps: float, substeps: int, out: np.ndarray, limit: float = np.inf) -> int:
         """Integrate from rest and write u of the free vertices into out (F, N, 3).
 
         Returns the number of factorizations. The gain drift is only measured on frames
         whose gain changes or while the factorized gain differs from the current one.
+        Raises _Diverged at the first frame whose |u| exceeds `limit` (or is not a number).
         """
         frames, n, free = len(y), len(self.free), self.free
         every = n == y.shape[1]
@@ -631,8 +684,11 @@ class _Tissue:
                 change = gain[f + 1, free] - g_now
                 reach = np.abs(g_now - gain_ref) + frac[step].max() * np.abs(change)
                 drift = float(np.max(sensitivity * reach))
-                # a held expression's lasting correction grows on springs stiffer along the normal: refactorize once
-                if drift > self.tolerance or (drift > 0 and self.directions.normals is not None and not moving[f]):
+                explicit = float(np.max(self.explicit_weight * reach))
+                # refactorize for accuracy (drift), for stability (explicit), and once for a held expression, whose lasting
+                # correction grows on springs stiffer along the normal
+                if (drift > self.tolerance or explicit > EXPLICIT_LIMIT
+                        or (drift > 0 and self.directions.normals is not None and not moving[f])):
                     gain_ref = g_now + frac[step].mean() * change
                     lu, stiffness, sensitivity = self._factorize(gain_ref)
                     factorizations += 1
@@ -653,6 +709,8 @@ class _Tissue:
             x[:, 12:15], x[:, 15:18] = w.real, w.imag
             x[:, 6:12] = x[:, 6:18] @ advance
             if (step + 1) % substeps == 0:
+                if not np.abs(u).max() <= limit:  # checked every frame: a diverging take stops at once
+                    raise _Diverged(f + 1)
                 if every:
                     out[f + 1] = u
                 else:

@@ -42,7 +42,7 @@ response to that turn, so `dynamics` = offsets - sag is what motion adds.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -51,7 +51,8 @@ from scipy.sparse.csgraph import connected_components
 
 from facedyn.geometry import mesh
 from facedyn.sim import layout
-from facedyn.sim.tissue import SimulationDiverged, SkullMotion, check_band, single_threaded_blas, validate_inputs
+from facedyn.sim.tissue import (SimulationDiverged, SkullMotion, check_band, single_threaded_blas, substep_ladder,
+                                validate_inputs)
 
 # A prism (three tetrahedra) thinner than this fraction of its ideal volume counts as folded.
 _MIN_QUALITY = 0.2
@@ -201,7 +202,15 @@ def simulate(
     if frames > 1 and layer.free.size:
         skull = SkullMotion(translate, orient, fps, params.gravity_cm_s2)
         with single_threaded_blas():
-            factorizations, iterations = _integrate(layer, y, skull, fps, params, offsets)
+            for substeps in substep_ladder(params.substeps):  # a diverging take is integrated again at finer steps
+                try:
+                    factorizations, iterations = _integrate(layer, y, skull, fps, replace(params, substeps=substeps), offsets)
+                    break
+                except SimulationDiverged as diverged:
+                    failure = diverged
+            else:
+                raise SimulationDiverged(f"{failure} even at {substeps} steps per frame: the skull's accelerations or the "
+                                         "expression's changes there are beyond what a face's tissue undergoes")
             turned = skull.gravity_change(orient)
             if np.any(turned):
                 sag[:, layer.vertices] = layer.gravity_sag(y, turned)
@@ -674,11 +683,9 @@ def _integrate(layer: Layer, y: np.ndarray, skull: SkullMotion, fps: float, para
                     x[free] += u
                     solver, factorizations = factorize(layer.tangent_stiffness(x, shape, volume)), factorizations + 1
                     continue
-                raise SimulationDiverged(f"the volumetric tissue did not converge at frame {step // substeps}: "
-                                 "skull accelerations or expression changes too large for the step (raise substeps)")
+                raise SimulationDiverged(f"the volumetric tissue did not converge at frame {step // substeps}")
             if not np.isfinite(u).all():
-                raise SimulationDiverged(f"the volumetric tissue diverged at frame {step // substeps}: "
-                                 "skull accelerations or expression changes too large for the step (raise substeps)")
+                raise SimulationDiverged(f"the volumetric tissue diverged at frame {step // substeps}")
             break
         a = c1 * (u - u_old - h * v_old) - a_old
         v = c2 * (u - u_old) - v_old

@@ -9,12 +9,20 @@ Each take is a folder:
     <take>/truth.usda              root: [truth/quasistatic, truth/skull, capture]
 
 so a processor reading take.usda never sees the truth by accident, and an evaluation opens
-truth.usda. A corpus folder lists its takes in corpus.json.
+truth.usda. A corpus folder lists its takes in corpus.json (`takes`), and the takes the
+simulator could not integrate with their errors (`failed`, which no reader trains on).
+
+A corpus is built to survive interruptions: each take is written under a temporary name and
+renamed into place with its recipe (`<take>/simulated.json`: a hash of its TakeSpec, the
+rig and the tissue), so a folder with a recipe is complete, and a later run on the same
+folder keeps the takes whose recipe matches and simulates only the rest.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import shutil
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -23,7 +31,8 @@ import numpy as np
 
 import facedyn
 from facedyn.progress import Progress
-from facedyn.sim.corpus import SimulatedPerformance, TakeSpec, simulate_takes
+from facedyn.errors import FacedynError
+from facedyn.sim.corpus import SimulatedPerformance, TakeSpec, simulate_each
 from facedyn.sim.rig import FaceRig
 from facedyn.sim.tissue import TissueParams
 from facedyn.usd import schema
@@ -34,6 +43,8 @@ from facedyn.usd.take import read_take
 from facedyn.usd.timing import Timing
 
 CORPUS_INDEX = "corpus.json"
+TAKE_RECIPE = "simulated.json"  # in a complete take folder: its recipe and its corpus.json entry
+PARTIAL = ".partial-"  # a take folder being written: .<take>.partial-<pid>
 
 
 def write_simulated_take(folder: Path, take: SimulatedPerformance, rig: FaceRig) -> dict:
@@ -74,6 +85,7 @@ def write_simulated_take(folder: Path, take: SimulatedPerformance, rig: FaceRig)
         "frames": int(len(frames)),
         "fps": take.fps,
         "spec": spec,
+        "substeps": int(take.info.get("substeps", 1)),  # steps per frame the physics took (more where it had to retry)
         "peak_offset_mm": round(float(magnitude.max()) * 10, 3),
         "rms_offset_mm": round(float(np.sqrt(np.mean(face_magnitude**2))) * 10, 3),
     }
@@ -104,21 +116,174 @@ def build_corpus(
     progress: Progress | None = None,
     description: dict | None = None,
     jobs: int = 1,
+    *,
+    other_recipes: str = "redo",
 ) -> dict:
-    """Simulate (`jobs` takes at a time) and write every take of `specs`; return the corpus index."""
+    """Simulate (`jobs` takes at a time) and write every take of `specs`; return the corpus index.
+
+    Takes already complete in `output` with the same recipe are kept (an interrupted corpus
+    resumes); a complete take of another recipe is simulated again (`other_recipes`
+    'redo') or refused ('refuse': a FacedynError naming what differs). A take the
+    simulator cannot integrate is reported, skipped and listed under `failed`: the others
+    go on, and the corpus is written when at least one take is.
+    """
     progress = progress or Progress.silent()
     output = corpus_folder(output)
     started = time.perf_counter()
-    written = 0.0
-    takes = []
+    corpus = ResumedCorpus(output, rig, specs, tissue, other_recipes)
     progress.start(f"simulate {len(specs)} takes", len(specs))
-    for take in simulate_takes(rig, specs, tissue, jobs):
-        t0 = time.perf_counter()
-        takes.append(write_simulated_take(output / take.spec.name, take, rig))
-        written += time.perf_counter() - t0
+    if corpus.resumed:
+        progress.note(f"{output}: {corpus.resumed} of {len(specs)} takes already complete, kept")
+        progress.advance(corpus.resumed)
+    for spec, take, error in simulate_each(rig, corpus.missing(), tissue, jobs):
+        if error is not None:
+            corpus.errors[spec.name] = error
+            progress.note(f"take {spec.name} skipped: {error}")
+        else:
+            t0 = time.perf_counter()
+            corpus.done[spec.name] = write_take_atomically(output, take, rig, corpus.recipes[spec.name])
+            corpus.written += time.perf_counter() - t0
         progress.advance()
     progress.finish()
-    return write_corpus_index(output, rig, tissue, takes, description, jobs, written, time.perf_counter() - started)
+    return corpus.write_index(description, jobs, time.perf_counter() - started)
+
+
+class ResumedCorpus:
+    """A corpus folder's takes for `specs`: their recipes, the ones complete (kept from an earlier run, or
+    written now: `done`, name -> corpus entry) and the ones that failed (`errors`, name -> message)."""
+
+    def __init__(self, output: Path, rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | None, other_recipes: str = "redo"):
+        if other_recipes not in ("redo", "refuse"):
+            raise ValueError(f"other_recipes must be 'redo' or 'refuse', got {other_recipes!r}")
+        self.output, self.rig, self.specs, self.tissue = output, rig, specs, tissue
+        rig_hash = rig_fingerprint(rig)
+        self.recipes = {spec.name: take_recipe(spec, rig_hash, tissue) for spec in specs}
+        sweep_partial_takes(output)
+        refuse = other_recipes == "refuse"
+        self.done = {spec.name: entry for spec in specs
+                     if (entry := complete_take(output / spec.name, self.recipes[spec.name], refuse)) is not None}
+        self.resumed = len(self.done)
+        self.errors: dict[str, str] = {}
+        self.written = 0.0  # seconds spent writing takes
+
+    def missing(self) -> list[TakeSpec]:
+        return [spec for spec in self.specs if spec.name not in self.done]
+
+    def write_index(self, description: dict | None, jobs: int, total: float) -> dict:
+        """corpus.json for the takes in the specs' order; a FacedynError when none of them could be simulated."""
+        failed = [{"name": spec.name, "error": self.errors[spec.name]} for spec in self.specs if spec.name in self.errors]
+        if self.specs and not self.done:
+            raise FacedynError(f"{self.output}: no take could be simulated; {failed[0]['name']}: {failed[0]['error']}")
+        takes = [self.done[spec.name] for spec in self.specs if spec.name in self.done]
+        return write_corpus_index(self.output, self.rig, self.tissue, takes, description, jobs, self.written, total,
+                                  failed=failed, resumed=self.resumed)
+
+
+def rig_fingerprint(rig: FaceRig) -> str:
+    """A hash of everything of the rig a simulation reads: neutral, topology, shapes, rigid weights."""
+    digest = hashlib.sha256()
+    for array in (rig.neutral, rig.topology.face_vertex_counts, rig.topology.face_vertex_indices, rig.rigid_weights):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    for name, (indices, offsets) in zip(rig.expression_names, rig.expression_offsets):
+        digest.update(name.encode())
+        digest.update(np.ascontiguousarray(indices).tobytes())
+        digest.update(np.ascontiguousarray(offsets).tobytes())
+    return digest.hexdigest()
+
+
+def take_recipe(spec: TakeSpec, rig_hash: str, tissue: TissueParams | None) -> dict:
+    """What decides a take's content, JSON-able: its spec (a data file by its name and content,
+    not by the path it was given as), the rig's fingerprint and the corpus's tissue, with their hash."""
+    recipe = {k: v for k, v in asdict(spec).items() if v is not None}
+    if spec.dialog is not None:
+        recipe["dialog"] = _file_key(spec.dialog)
+    kind, _, arg = spec.motion.partition(":")
+    if kind == "bvh":
+        path, sep, joint = arg.partition("#")
+        recipe["motion"] = f"bvh:{_file_key(path)}{sep}{joint}"
+    recipe = {"spec": recipe, "rig": rig_hash, "tissue": asdict(tissue) if tissue is not None else None}
+    recipe["hash"] = hashlib.sha256(json.dumps(recipe, sort_keys=True, default=str).encode()).hexdigest()
+    return recipe
+
+
+def _file_key(path: str) -> str:
+    """A data file as `name@sha256` (the same curves given by another path are the same recipe)."""
+    try:
+        return f"{Path(path).resolve().name}@{hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]}"
+    except OSError:
+        return path  # unreadable: the simulation will say so
+
+
+def complete_take(folder: Path, recipe: dict, refuse: bool = True) -> dict | None:
+    """The corpus entry of a complete take of this recipe in `folder`; None when there is none to keep.
+
+    A take folder of another recipe is a FacedynError naming what differs (`refuse`: not
+    overwritten) or None (simulated again); so is a folder without a recipe (an older
+    facedyn's take, simulated again).
+    """
+    marker = folder / TAKE_RECIPE
+    if not marker.is_file():
+        return None
+    try:
+        kept = json.loads(marker.read_text())
+        ok = kept["recipe"]["hash"] == recipe["hash"]
+        entry = kept["entry"]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise FacedynError(f"{marker}: unreadable; delete {folder} to simulate the take again") from None
+    if not ok and not refuse:
+        return None
+    if not ok:
+        differs = _differences(kept["recipe"], recipe)
+        raise FacedynError(f"{folder}: a take simulated with another recipe (it differs in {differs or 'the simulator'}); write the corpus "
+                           f"to another folder, or delete {folder} to simulate it again")
+    return entry
+
+
+def _differences(old: dict, new: dict) -> str:
+    names = [f"spec.{k}" for k in sorted(set(old.get("spec", {})) | set(new["spec"])) if old.get("spec", {}).get(k) != new["spec"].get(k)]
+    names += [k for k in ("rig", "tissue") if old.get(k) != new[k]]
+    return ", ".join(names)
+
+
+def write_take_atomically(output: Path, take: SimulatedPerformance, rig: FaceRig, recipe: dict) -> dict:
+    """Write a take under a temporary name with its recipe and rename it into place; return its corpus entry."""
+    name = take.spec.name
+    partial = output / f".{name}{PARTIAL}{os.getpid()}"
+    if partial.exists():
+        shutil.rmtree(partial)
+    try:
+        entry = write_simulated_take(partial, take, rig)
+        entry["folder"] = name
+        (partial / TAKE_RECIPE).write_text(json.dumps({"recipe": recipe, "entry": entry}, indent=2, default=str))
+        final = output / name
+        if final.exists():  # a take of another recipe, or an older facedyn's (complete_take kept neither): replaced
+            shutil.rmtree(final)
+        partial.rename(final)
+    except BaseException:
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
+    return entry
+
+
+def sweep_partial_takes(output: Path) -> None:
+    """Remove take folders (and corpus.json) left half-written by runs that died (their pid is gone)."""
+    for path in output.glob(f".*{PARTIAL}*"):
+        pid = path.name.rpartition(PARTIAL)[2]
+        if pid.isdigit() and not _alive(int(pid)):
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                path.unlink(missing_ok=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def corpus_folder(output: Path) -> Path:
@@ -131,28 +296,33 @@ def corpus_folder(output: Path) -> Path:
 
 
 def write_corpus_index(output: Path, rig: FaceRig, tissue: TissueParams | None, takes: list[dict], description: dict | None,
-                       jobs: int, written: float, total: float) -> dict:
-    """Write corpus.json for the written takes (write_simulated_take's entries, in order); return it."""
+                       jobs: int, written: float, total: float, *, failed: list[dict] = (), resumed: int = 0) -> dict:
+    """Write corpus.json (atomically) for the written takes (write_simulated_take's entries, in order) and the failed
+    ones ({name, error}; `resumed`: takes kept from an earlier run); return it."""
     frames = sum(t["frames"] for t in takes)
     index = {
         "rig": rig.name,
         "points": rig.point_count,
         "tissue": asdict(tissue or TissueParams()),
         "takes": takes,
+        "failed": list(failed),
+        "resumed": resumed,
         "description": description or {},
         "frames": frames,
         "jobs": jobs,
         "seconds": {"write": round(written, 2), "total": round(total, 2)},
         "simulated_frames_per_second": round(frames / total, 1),  # corpus built per wall-clock second, writing included
     }
-    (output / CORPUS_INDEX).write_text(json.dumps(index, indent=2))
+    partial = output / f".{CORPUS_INDEX}{PARTIAL}{os.getpid()}"
+    partial.write_text(json.dumps(index, indent=2))
+    partial.replace(output / CORPUS_INDEX)
     return index
 
 
 def read_corpus_index(folder: Path) -> dict:
     path = Path(folder) / CORPUS_INDEX
     if not path.is_file():
-        raise TakeError(f"{folder}: not a facedyn corpus (no {CORPUS_INDEX}; build one with `usdfacedyn synth`)")
+        raise TakeError(f"{folder}: not a facedyn corpus (no {CORPUS_INDEX}; build one with `usdfacedyn simulate`)")
     return json.loads(path.read_text())
 
 

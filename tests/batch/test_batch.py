@@ -1,4 +1,4 @@
-"""`usdfacedyn batch` and `synth` on a local Dask cluster of 2 worker processes, on small
+"""`usdfacedyn batch` and `simulate` on a local Dask cluster of 2 worker processes, on small
 simulated takes of the built-in face (a few seconds each)."""
 from __future__ import annotations
 
@@ -141,15 +141,17 @@ def tree_checksums(folder: Path) -> dict[str, str]:
             for p in sorted(folder.rglob("*")) if p.is_file() and p.name != "corpus.json"}
 
 
-def test_synth_on_the_cluster_writes_the_same_bytes_with_one_or_two_workers(rig, client, tmp_path):
+def test_simulate_on_the_cluster_writes_the_same_bytes_with_one_or_two_workers(rig, client, tmp_path):
     specs = [TakeSpec(f"take{i}", motion, "smile", duration_s=0.3, seed=i) for i, motion in enumerate(("walk", "hop", "platform:9"))]
+    specs.insert(1, TakeSpec("unreadable", "still", dialog=str(tmp_path / "missing.csv"), duration_s=0.3))  # skipped, recorded
     out = tmp_path / "corpus"
     two = build_corpus_on(client, out, rig, specs)
     on_two = tree_checksums(out)
     shutil.rmtree(out)
     with open_client(workers=1) as single:
         one = build_corpus_on(single, out, rig, specs)
-    assert tree_checksums(out) == on_two and len(on_two) == 5 * len(specs)
+    assert tree_checksums(out) == on_two and len(on_two) == 6 * 3  # 5 layers and the recipe per written take
+    assert one["failed"] == two["failed"] and [f["name"] for f in one["failed"]] == ["unreadable"]
     assert one["takes"] == two["takes"] and [t["name"] for t in one["takes"]] == ["take0", "take1", "take2"]
     assert (one["jobs"], two["jobs"]) == (1, 2)
 

@@ -7,7 +7,7 @@ from facedyn.errors import UsageError
 from facedyn.processors import registry
 from facedyn.processors.base import Parameter, Reads, Writes
 
-BUILT_IN = ("import", "stabilize", "remove", "synthesize", "retarget", "preview", "synth", "train-removal", "train-synthesis", "demo", "actor", "evaluate")
+BUILT_IN = ("import", "stabilize", "remove", "synthesize", "retarget", "preview", "simulate", "synth", "train-removal", "train-synthesis", "demo", "actor", "evaluate")
 
 
 def run(argv, capsys):
@@ -43,10 +43,10 @@ def test_every_built_in_command_is_a_declared_processor():
     (["train-removal", "c", "-o", "m", "--seed", "-1"], "--seed"),
     (["train-synthesis", "c", "-o", "m", "--quasistatic", "truth", "--epochs", "0"], "--epochs"),
     (["train-synthesis", "c", "-o", "m"], "--quasistatic"),
-    (["synth", "-o", "c", "--actor-seed", "-1"], "--actor-seed"),
-    (["synth", "-o", "c", "--noise", "nan"], "--noise"),
-    (["synth", "-o", "c", "--noise", "-1"], "--noise"),
-    (["synth", "-o", "c", "--jobs", "0"], "--jobs"),
+    (["simulate", "-o", "c", "--actor-seed", "-1"], "--actor-seed"),
+    (["simulate", "-o", "c", "--noise", "nan"], "--noise"),
+    (["simulate", "-o", "c", "--noise", "-1"], "--noise"),
+    (["simulate", "-o", "c", "--jobs", "0"], "--jobs"),
     (["stabilize", "t.usda", "-o", "s.usdc", "--reference-fps", "0"], "--reference-fps"),
     (["stabilize", "t.usda", "-o", "s.usdc", "--reference-fps", "nan"], "--reference-fps"),
     (["stabilize", "t.usda", "-o", "s.usdc", "--reference-fps", "-120"], "--reference-fps"),

@@ -143,3 +143,65 @@ def test_a_soft_hz_band_narrows_the_drawn_frequency_and_keeps_the_rest_of_the_ac
     assert len({s.tissue.soft_hz for s in specs}) > 1  # still one draw per take
     with pytest.raises(ValueError, match="randomize_tissue"):
         protocol(rig, "demo", soft_hz=(6.0, 6.5))
+
+
+def test_expression_speeds_are_limited_to_what_faces_do():
+    """A Live Link jump (a lost frame) becomes a ramp at MAX_WEIGHT_RATE; a real performance passes unchanged."""
+    from facedyn.sim.corpus import MAX_WEIGHT_RATE, limit_rate
+
+    weights = np.zeros((40, 2), np.float32)
+    weights[10:, 0] = 0.9  # a jump from 0 to 0.9 in one frame
+    weights[:, 1] = 0.5 + 0.4 * np.sin(np.arange(40) / 120 * 2 * np.pi * 2)  # 2 Hz: 5/s at most
+    limited = limit_rate(weights, 120.0)
+    step = MAX_WEIGHT_RATE / 120.0
+    assert np.abs(np.diff(limited, axis=0)).max() <= step + 1e-6
+    assert np.allclose(limited[10:14, 0], [0.25, 0.5, 0.75, 0.9]) and limited[-1, 0] == np.float32(0.9)  # 0.25 a frame
+    assert np.array_equal(limited[:, 1], weights[:, 1])
+
+
+def test_the_shared_performances_are_within_the_speed_limit(shared_data):
+    from facedyn.io.livelink import read_livelink_csv
+    from facedyn.io.resample import resample_curves
+    from facedyn.sim.corpus import MAX_WEIGHT_RATE
+
+    rig = default_face()
+    for csv in (SPEECH,) + PERFORMANCES:
+        curves = resample_curves(read_livelink_csv(shared_data / "livelink-face" / csv, rig.expression_names), 120.0)
+        assert np.abs(np.diff(curves.weights, axis=0)).max() * 120.0 < MAX_WEIGHT_RATE, csv
+
+
+def test_held_expressions_find_arkit_names():
+    """An ARKit-named rig (eyeBlinkLeft; one browInnerUp and cheekPuff) gets the same ten expressions."""
+    from facedyn.sim.corpus import held_expressions, rig_recipe
+    from facedyn.sim.rig import FaceRig
+
+    rig = small_face()
+
+    def arkit(name):
+        return name[:-2] + ("Left" if name.endswith("_L") else "Right") if name.endswith(("_L", "_R")) else name
+
+    names = [arkit(n) for n in rig.expression_names]
+    merged = {"browInnerUpLeft": "browInnerUp", "browInnerUpRight": None, "cheekPuffLeft": "cheekPuff", "cheekPuffRight": None}
+    keep = [i for i, n in enumerate(names) if merged.get(n, n) is not None]
+    renamed = FaceRig(name="arkit", neutral=rig.neutral, topology=rig.topology,
+                      expression_names=tuple(merged.get(names[i], names[i]) for i in keep),
+                      expression_offsets=tuple(rig.expression_offsets[i] for i in keep))
+    assert held_expressions(renamed) == held_expressions(rig) and len(held_expressions(renamed)) == 10
+    assert rig_recipe(renamed.expression_names, {"browInnerUp_L": 0.8, "browInnerUp_R": 0.8, "mouthSmile_L": 0.9}) == {
+        "browInnerUp": 0.8, "mouthSmileLeft": 0.9}
+    spec = TakeSpec("smile", "still", "smile", duration_s=0.5)
+    assert np.allclose(expression_weights(renamed, spec, 60)[:, renamed.shape_index("mouthSmileLeft")],
+                       expression_weights(rig, spec, 60)[:, rig.shape_index("mouthSmile_L")])
+
+
+def test_a_data_folder_must_hold_what_the_protocol_reads(tmp_path, shared_data):
+    from facedyn.errors import UsageError
+    from facedyn.sim.corpus import check_data_folder, data_files
+
+    check_data_folder(shared_data, "standard")
+    with pytest.raises(UsageError, match="no such folder"):
+        protocol(small_face(), "demo", tmp_path / "nothing")
+    (tmp_path / "livelink-face").mkdir()
+    with pytest.raises(UsageError, match="missing livelink-face/MySlate"):
+        check_data_folder(tmp_path, "demo")
+    assert set(data_files("demo")) < set(data_files("standard"))

@@ -14,7 +14,7 @@ import scipy.sparse as sp
 from scipy.integrate import solve_ivp
 
 from facedyn.geometry import mesh, quaternion
-from facedyn.sim.tissue import SimulationResult, TissueParams, simulate
+from facedyn.sim.tissue import SimulationDiverged, SimulationResult, TissueParams, simulate
 
 FPS = 120.0
 
@@ -446,6 +446,28 @@ def test_a_held_expression_on_springs_stiff_along_the_normal_stays_stable():
     assert np.abs(lazy - eager).max() < 0.01 * np.abs(eager).max() < 0.1
 
 
+def test_an_expression_that_never_quite_holds_still_stays_stable_on_springs_stiff_along_the_normal():
+    """The held expression above, creeping by 1e-4 of a weight as a Live Link curve does: its gain
+    moves on every frame but drifts less than the tolerance, so the correction stayed explicit
+    for seconds and diverged (frame 203); the stability bound (EXPLICIT_LIMIT) refactorizes it,
+    at one step per frame, matching refactorizing every step."""
+    from facedyn.sim.corpus import TakeSpec, expression_weights, skull_motion
+    from facedyn.sim.default_face import default_face
+
+    rig = default_face()
+    params = TissueParams.random(13)
+    spec = TakeSpec("jaw_open_dance", "dance", "jaw_open", duration_s=2.0, seed=13)
+    trajectory = skull_motion(spec)
+    weights = expression_weights(rig, spec, trajectory.frame_count)
+    t = np.arange(trajectory.frame_count) / spec.fps
+    weights[:, rig.shape_index("jawOpen")] += 1e-4 * np.sin(2 * np.pi * 0.7 * t) * (t > 0.3)
+    args = (rig.evaluate(weights), rig.topology.triangles(), trajectory.translate, trajectory.orient, spec.fps)
+    lazy = simulate(*args, params, rigid_weights=rig.rigid_weights, neutral=rig.neutral)
+    eager = simulate(*args, replace(params, refactor_tolerance=1e-9), rigid_weights=rig.rigid_weights, neutral=rig.neutral)
+    assert lazy.substeps == 1 and lazy.factorizations < eager.factorizations / 4
+    assert np.abs(lazy.offsets - eager.offsets).max() < 0.01 * np.abs(eager.offsets).max() < 0.1
+
+
 def test_the_rigid_region_stays_exactly_on_the_bone(patch):
     points, tris, weights = patch
     frames = 120
@@ -546,3 +568,32 @@ def test_bad_input_is_a_clear_error(change, message):
 def test_bad_params_are_a_clear_error(params, message):
     with pytest.raises(ValueError, match=message):
         TissueParams(**params)
+
+
+def test_substeps_double_up_to_the_finest():
+    from facedyn.sim.tissue import MAX_SUBSTEPS, substep_ladder
+
+    assert substep_ladder(1) == [1, 2, 4, 8, 16] and MAX_SUBSTEPS == 16
+    assert substep_ladder(3) == [3, 6, 12] and substep_ladder(32) == [32]
+
+
+def test_a_diverging_integration_is_retried_at_finer_steps(patch, monkeypatch):
+    """Springs 4x stiffer along the normal (160 Hz on the bone) whose gain drift is never
+    refactorized (no tolerance, no stability bound) diverge at one step per frame (the explicit
+    correction feeds a stiff mode): the safety net for what a bound misses integrates the take
+    again at finer steps, and it matches refactorizing every step."""
+    from facedyn.sim import tissue
+
+    monkeypatch.setattr(tissue, "EXPLICIT_LIMIT", np.inf)
+    points, tris, weights = patch
+    frames = 120
+    translate, orient = sinusoid(frames, 8.0, 0.3)
+    y = talking(points, frames, amount=0.3, hz=2.0)
+    params = TissueParams(strain_stiffening=10.0, normal_ratio=4.0, refactor_tolerance=100.0)
+    retried = simulate(y, tris, translate, orient, FPS, params, rigid_weights=weights, neutral=points)
+    eager = simulate(y, tris, translate, orient, FPS, replace(params, refactor_tolerance=1e-9), rigid_weights=weights, neutral=points)
+    assert retried.substeps > 1 and eager.substeps == 1
+    assert np.abs(retried.offsets - eager.offsets).max() < 0.01 * np.abs(eager.offsets).max()
+    with pytest.raises(SimulationDiverged, match=r"diverged at frame \d+ \(.* s\) even at 2 steps per frame"):
+        simulate(y, tris, translate, orient, FPS, replace(params, substeps=2), rigid_weights=weights, neutral=points,
+                 max_substeps=2)

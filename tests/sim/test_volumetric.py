@@ -261,3 +261,18 @@ def test_the_two_physics_agree_in_order_of_magnitude_only(face):
     assert 1 / 3 < rms[0] / rms[1] < 3, rms
     difference = float(np.sqrt(np.mean(np.sum((springs - layer) ** 2, axis=-1))))
     assert difference > 0.2 * min(rms)  # they are meant to differ
+
+
+def test_a_step_that_does_not_converge_is_retried_finer_then_an_error_naming_the_frame(sheet, monkeypatch):
+    points, tris, weights = sheet
+    frames = 4
+    translate = np.zeros((frames, 3))
+    translate[1:, 1] = 2.0  # a jolt
+    monkeypatch.setattr(volumetric, "_MAX_ITERATIONS", 0)  # no step converges, at any step size
+    tried = []
+    integrate = volumetric._integrate
+    monkeypatch.setattr(volumetric, "_integrate", lambda layer, y, skull, fps, params, out: tried.append(params.substeps)
+                        or integrate(layer, y, skull, fps, params, out))
+    with pytest.raises(tissue.SimulationDiverged, match=r"did not converge at frame \d even at 16 steps per frame"):
+        simulate(held(points, frames), tris, translate, quaternion.identity((frames,)), FPS, flat(), rigid_weights=weights)
+    assert tried == [1, 2, 4, 8, 16]

@@ -1,12 +1,16 @@
-"""`usdfacedyn synth`: simulate a corpus of takes with known truth (the papers' capture protocol).
+"""`usdfacedyn simulate`: simulate a corpus of takes with known truth (the papers' capture protocol).
 
 A corpus builder: it writes a folder (corpus.json plus one take folder per take, each with
-its truth beside it), the input of the trainers.
+its truth beside it), the input of the trainers. A take the simulator cannot integrate is
+reported, skipped and listed in corpus.json (`failed`); re-running the same command on the
+same folder keeps the takes already complete and simulates only the rest
+(facedyn.usd.corpus.build_corpus). `synth` is its old name, kept as a deprecated alias.
 """
 from __future__ import annotations
 
 import fnmatch
 import os
+import sys
 from pathlib import Path
 
 from facedyn.errors import UsageError
@@ -14,17 +18,18 @@ from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Re
 from facedyn.progress import Progress
 
 
-class SynthProcessor(Processor):
-    name = "synth"
+class SimulateProcessor(Processor):
+    name = "simulate"
     version = "1"
     summary = "simulate a corpus of takes with known truth (the papers' capture protocol)"
     reads = Reads("nothing")
-    writes = Writes("folder", metavar="DIR", help="the corpus folder to write")
+    writes = Writes("folder", metavar="DIR", help="the corpus folder to write (an interrupted one is resumed)", resumable=True)
     parameters = (
         Parameter("scale", str, "demo", "protocol size", ("demo", "standard")),
         Parameter("rig", Path, None, "a UsdSkel blend-shape rig (default: the built-in face)", metavar="RIG"),
         Parameter("actor_seed", int, None, "make another actor from the rig's identity modes", minimum=0, maximum=2**32 - 1),
-        Parameter("data", Path, None, "a ../shared/data-like folder with Live Link curves and CMU mocap for dialog takes", metavar="DIR"),
+        Parameter("data", Path, None, "a ../shared/data-like folder with Live Link curves (livelink-face/*.csv) and CMU "
+                  "mocap (cmu-mocap/*.bvh) for dialog takes", metavar="DIR"),
         Parameter("noise", float, 0.0, "Gaussian tracking noise on the captured points, cm", minimum=0.0, maximum=10.0, metavar="CM"),
         Parameter("seed", int, 0, "seed of the protocol's random choices", minimum=0, maximum=2**32 - 1),
         Parameter("only", str, "", "only takes whose name matches this glob pattern", metavar="PATTERN"),
@@ -40,9 +45,10 @@ class SynthProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.sim.corpus import protocol
+        from facedyn.sim.corpus import check_data_folder, protocol
 
         params = request.params
+        check_data_folder(params["data"], params["scale"])
         band = soft_hz_band(params["soft_hz"])
         if band is not None and params["randomize_tissue"] == "none":
             raise UsageError("--soft-hz sets the band randomized tissue is drawn from: add --randomize-tissue take (or corpus)")
@@ -66,9 +72,22 @@ class SynthProcessor(Processor):
                        "noise_cm": params["noise"], "seed": params["seed"], "physics": params["physics"],
                        "randomize_tissue": params["randomize_tissue"], "extra_motions": params["extra_motions"],
                        "impacts": params["impacts"], "soft_hz": params["soft_hz"] or "the family's"}
-        index = build_corpus(request.output, rig, specs, progress=progress, description=description, jobs=params["jobs"])
-        return FolderOutput({"takes": len(index["takes"]), "frames": index["frames"], "points": index["points"],
+        index = build_corpus(request.output, rig, specs, progress=progress, description=description, jobs=params["jobs"],
+                             other_recipes="refuse")  # a folder of another corpus is never overwritten from the command line
+        return FolderOutput({"takes": len(index["takes"]), "failed": [take["name"] for take in index["failed"]],
+                             "resumed": index["resumed"], "frames": index["frames"], "points": index["points"],
                              "simulated_frames_per_second": index["simulated_frames_per_second"], "jobs": params["jobs"]})
+
+
+class SynthAliasProcessor(SimulateProcessor):
+    """`synth`, the old name of `simulate` (it sounded like `synthesize`): the same command, with a note."""
+
+    name = "synth"
+    summary = "deprecated alias of `simulate`"
+
+    def prepare(self, request: Request) -> Plan:
+        print("usdfacedyn: `synth` is deprecated and will be removed; use `usdfacedyn simulate` (the same command)", file=sys.stderr)
+        return super().prepare(request)
 
 
 def soft_hz_band(text: str) -> tuple[float, float] | None:

@@ -1,4 +1,4 @@
-"""`synth --impacts`: every gait take of the corpus jolts at its foot contacts, and the corpus says so."""
+"""`simulate --impacts`: every gait take of the corpus jolts at its foot contacts, and the corpus says so."""
 import json
 
 import numpy as np
@@ -11,9 +11,9 @@ def cli(*argv):
     return main([str(a) for a in argv] + ["-q"])
 
 
-def test_synth_impacts_jolts_the_gait_takes_and_records_it(tmp_path):
+def test_simulate_impacts_jolts_the_gait_takes_and_records_it(tmp_path):
     for name, flag in (("smooth", "false"), ("jolted", "true")):
-        assert cli("synth", "-o", tmp_path / name, "--scale", "demo", "--only", "smile_walk", "--impacts", flag, "--jobs", "1") == 0
+        assert cli("simulate", "-o", tmp_path / name, "--scale", "demo", "--only", "smile_walk", "--impacts", flag, "--jobs", "1") == 0
     smooth = json.loads((tmp_path / "smooth" / "corpus.json").read_text())
     jolted = json.loads((tmp_path / "jolted" / "corpus.json").read_text())
     assert smooth["description"]["impacts"] is False and jolted["description"]["impacts"] is True
