@@ -23,7 +23,8 @@ def main() -> None:
     parser.add_argument("actor", nargs="?", choices=sorted(ACTORS), help="the actor to generate")
     parser.add_argument("-o", "--output", type=Path, help="the actor folder to write (must not exist)")
     parser.add_argument("--takes", default="session,test", help="comma-separated: session, test (default both)")
-    parser.add_argument("--seconds-scale", type=float, default=1.0, help="scales every take's length (2.5 s session, 3 s test)")
+    parser.add_argument("--seconds-scale", type=float, default=1.0, help="scales every take's length (2 s session, 2.5 s test)")
+    parser.add_argument("--jobs", type=int, default=1, help="takes simulated at a time, one core each")
     parser.add_argument("--data", type=Path, default=DATA, help="the shared data folder (ICT rig, Live Link CSVs, CMU mocap)")
     parser.add_argument("--list", action="store_true", help="list the actors and exit")
     args = parser.parse_args()
@@ -41,7 +42,7 @@ def main() -> None:
     if not args.data.is_dir():
         sys.exit(f"{args.data}: the shared data folder is needed (Live Link curves, CMU mocap, ICT rig)")
     try:
-        generate_actor(ACTORS[args.actor], args.output, args.data, which, args.seconds_scale)
+        generate_actor(ACTORS[args.actor], args.output, args.data, which, args.seconds_scale, max(args.jobs, 1))
     except FileExistsError as error:
         sys.exit(str(error))
 

@@ -3,25 +3,30 @@
 The layer (testset.shell) is one MuJoCo `flexcomp type="direct" dim="3"`: every node a body
 with three world-aligned slide joints, MuJoCo's 3-D flex elasticity (Young's modulus,
 Poisson ratio), gravity on, explicit Euler steps in the WORLD frame: the skull moves, the
-tissue's inertia is MuJoCo's own, nothing is transformed into the skull frame.
+tissue's inertia is MuJoCo's own, nothing is transformed into the skull frame. Node masses
+are each node's share of its tetrahedra (floored at 0.7 x the median: mass scaling, the
+lightest nodes set the explicit step's limit).
 
 Driving (all kinematic, as a mocap body would be but with the bone's true velocity, which
 MuJoCo's mocap bodies lack; the nodes' qpos/qvel are overwritten before every step):
 - pinned inner nodes (where the layer reaches the bone) follow the skull and the
   expression: skull(t) o (rest + the expression's displacement of the skin above): the
   deep layer slides with the muscles, the skin follows through the tissue;
-- unpinned inner nodes (over deep fat and cavities) are pulled toward the same target by
-  soft springs of `muscle_hz` (per node: k = m (2 pi muscle_hz)^2, with damping);
+- skin nodes on the rim of the face region (where the tissue goes on into the scalp and
+  neck, which are rigid here) follow skull(t) o rig(t);
+- unpinned inner nodes (over deep fat and cavities) are pulled toward their target by soft
+  "muscle" springs: the column above rings at `muscle_hz` on it, with damping;
 - rig vertices outside the face region (eyes, teeth, scalp) follow skull o rig(t) rigidly.
-Damping: MuJoCo's flex damping is unstable with explicit steps at this stiffness and
-'discrete' integration is 20x slower, so the tissue's damping is a viscous force on each
-free node relative to the bone's velocity field at it (mass proportional:
-c = 2 damping_ratio 2 pi soft_hz), applied through qfrc_applied.
+Damping: MuJoCo's flex damping is unstable with explicit steps at this stiffness and its
+'discrete' integrator is 20x slower, so the tissue's damping is a viscous force on each free
+node relative to the bone's velocity field at it (mass proportional: c = 2 damping_ratio
+2 pi soft_hz), applied through qfrc_applied.
 
-Quasistatic truth (`equilibrium`): the static equilibrium of the SAME MuJoCo model in the
-skull frame with the frame's gravity turned into it (R(t)^T g), the same kinematic nodes
-and muscle targets, zero velocity: MuJoCo's passive and gravity forces, solved by chord
-iterations with a stiffness matrix taken from MuJoCo's forces by finite differences.
+The quasistatic twin (`simulate(..., still=True)`): the same model, the same expression
+drive, the skull held at the origin, gravity turned into the skull frame as each step's pose
+turns it. Both runs start from the static equilibrium of frame 0 (`_solve`: chord iterations
+on MuJoCo's passive and gravity forces with a stiffness taken from them by finite
+differences), the skin moving with the bone.
 """
 from __future__ import annotations
 
@@ -37,8 +42,8 @@ GRAVITY = np.array([0.0, -9.81, 0.0])  # m/s^2, Y up (facedyn's world axes)
 _FD_STEP = 1e-6  # m: finite-difference step of the stiffness
 _TOLERANCE = 1e-6  # m: an equilibrium's largest correction at convergence (1 micron; dynamics are millimetres)
 _CHORD_ITERATIONS = 25  # per stiffness
-_RETAKES = 4
-_MASS_FLOOR = 0.7  # of the median node mass  # stiffness retakes before an equilibrium is given up
+_RETAKES = 4  # stiffness retakes before an equilibrium is given up
+_MASS_FLOOR = 0.7  # of the median node mass
 
 
 @dataclass(frozen=True)
@@ -88,7 +93,7 @@ class Drive:
 
 
 class MujocoTissue:
-    """A rig's face over MuJoCo tissue: build once per actor, then `simulate` and `equilibrium`."""
+    """A rig's face over MuJoCo tissue: build once per actor, then `simulate` its takes (and their still twins)."""
 
     def __init__(self, neutral_cm: np.ndarray, triangles: np.ndarray, face_vertices: np.ndarray, params: TissueParams, timestep: float):
         import mujoco
@@ -148,12 +153,12 @@ class MujocoTissue:
         nk, skin = len(self.kinematic), len(self.shell.skin)
         free_dof, kin_dof, mus_dof = self.dof[self.free], self.dof[self.kinematic], self.dof[self.muscle]
         out = []
+        last = len(drives) - 1
         for n in range(len(drives)):
-            here = drives[n]
-            after = drives[min(n + 1, len(drives) - 1)]
-            before = drives[max(n - 1, 0)]
+            here, after, before = drives[n], drives[min(n + 1, last)], drives[max(n - 1, 0)]
+            span = dt * (min(n + 1, last) - max(n - 1, 0))  # central differences, one-sided at the ends
             target_now = _to_world(here, here.targets)
-            target_velocity = (_to_world(after, after.targets) - _to_world(before, before.targets)) / (dt * max(min(n + 1, len(drives) - 1) - max(n - 1, 0), 1))
+            target_velocity = (_to_world(after, after.targets) - _to_world(before, before.targets)) / span
             if still:
                 m.opt.gravity[:] = drives.gravity(n)
             d.qpos[kin_dof] = target_now[:nk] - self.origin[self.kinematic]
@@ -161,7 +166,7 @@ class MujocoTissue:
             if n % record_every == 0:
                 out.append(d.qpos[self.dof[:skin]] + self.origin[:skin])
             x, v = d.qpos[free_dof] + self.origin[self.free], d.qvel[free_dof]
-            bone_velocity = _bone_velocity(before, after, x, dt * max(min(n + 1, len(drives) - 1) - max(n - 1, 0), 1))
+            bone_velocity = _bone_velocity(before, after, x, span)
             d.qfrc_applied[:] = 0.0
             d.qfrc_applied[free_dof] = -self.damping * self.mass[self.free, None] * (v - bone_velocity)
             xm, vm = d.qpos[mus_dof] + self.origin[self.muscle], d.qvel[mus_dof]
@@ -171,19 +176,7 @@ class MujocoTissue:
                 raise FloatingPointError(f"the MuJoCo tissue diverged at step {n} (|v| > 50 m/s)")
         return np.asarray(out)
 
-    def _rest_with(self, drive: Drive) -> np.ndarray:
-        rest = self.shell.nodes.copy()
-        rest[self.driven_nodes] = drive.targets
-        return rest
-
-    # -- the quasistatic truth, skull frame -------------------------------------------------
-    def equilibrium(self, drive: Drive, guess: np.ndarray | None = None) -> np.ndarray:
-        """Every node's static equilibrium (m, skull space) under `drive`'s expression and its
-        gravity turned into the skull frame; `guess`: a start (the previous frame's), else the
-        upright gravity's equilibrium."""
-        x = self._upright() if guess is None else guess
-        return self._solve(x, drive.rotation.T @ GRAVITY, drive)
-
+    # -- static equilibria, skull frame ------------------------------------------------------
     def _solve(self, x: np.ndarray, gravity: np.ndarray, drive: Drive) -> np.ndarray:
         """Chord iterations with backtracking (a step that raises the residual is halved); where
         they stall (the expression took the tissue far from where the stiffness was taken),
@@ -212,7 +205,7 @@ class MujocoTissue:
                                  f"chord iterations; last correction {np.abs(step).max() * 1e6:.2f} micron)")
 
     def _upright(self) -> np.ndarray:
-        """The neutral face's equilibrium under upright gravity, reached in load steps; the chord
+        """The neutral face's equilibrium under upright gravity (skull space, m), reached in load steps; the chord
         stiffness is last taken there (the sagged state every frame starts near)."""
         if self._upright_state is None:
             rest = Drive(np.eye(3), np.zeros(3), self.shell.nodes[self.driven_nodes])
@@ -237,18 +230,19 @@ class MujocoTissue:
         return force[self.free].ravel()
 
     def _factorized(self):
-        """K^-1 (K = -d force / d x over the free nodes at rest, MuJoCo's forces by finite
-        differences over a distance-2 colouring of the nodes), factorized once."""
+        """K^-1 (K = -d force / d x over the free nodes, MuJoCo's forces by finite differences
+        over a distance-2 colouring of the nodes), factorized when (re)taken."""
         if self._stiffness is None:
             rest = Drive(np.eye(3), np.zeros(3), self.shell.nodes[self.driven_nodes])
             self._stiffness = spla.factorized(self._finite_difference_stiffness(self.shell.nodes, rest).tocsc())
         return self._stiffness
 
     def _finite_difference_stiffness(self, state: np.ndarray, drive: Drive) -> sp.csr_matrix:
+        """K at `state`: one force evaluation per colour and axis (nodes of a colour share no tetrahedron's neighbour)."""
         shell = self.shell
         n = len(shell.nodes)
         rest = state
-        no_muscle = drive.targets[len(self.kinematic):]
+        muscle_targets = drive.targets[len(self.kinematic):]
         zero = np.zeros(3)
         tets = shell.tets
         pairs = np.stack(np.meshgrid(np.arange(4), np.arange(4)), -1).reshape(-1, 2)
@@ -258,7 +252,7 @@ class MujocoTissue:
         local = np.full(n, -1)
         local[self.free] = np.arange(len(self.free))
         colours = _distance2_colouring(adjacency, self.free)
-        base = self._residual(rest, zero, no_muscle).reshape(-1, 3)
+        base = self._residual(rest, zero, muscle_targets).reshape(-1, 3)
         entries_r, entries_c, entries_v = [], [], []
         for colour in range(colours.max() + 1):
             nodes = self.free[colours == colour]
@@ -266,7 +260,7 @@ class MujocoTissue:
             for axis in range(3):
                 x = rest.copy()
                 x[nodes, axis] += _FD_STEP
-                change = (self._residual(x, zero, no_muscle).reshape(-1, 3) - base) / _FD_STEP
+                change = (self._residual(x, zero, muscle_targets).reshape(-1, 3) - base) / _FD_STEP
                 coo = neighbours.tocoo()
                 keep = local[coo.col] >= 0
                 source, target = nodes[coo.row[keep]], coo.col[keep]

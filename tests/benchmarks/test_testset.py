@@ -86,14 +86,16 @@ def test_pinned_inner_layer_follows_the_bone(tissue):
     rig, t = tissue
     steps = 600
     translate = np.zeros((steps, 3))
-    translate[:, 1] = 2.0 * np.sin(2 * np.pi * 5 * np.arange(steps) / 600)  # 2 cm at 5 Hz
+    translate[:, 1] = 2.0 * np.sin(2 * np.pi * 1.5 * np.arange(steps) / 600)  # 2 cm at 1.5 Hz, below the tissue's modes
     drives = still_drives(t, rig, steps, translate)
-    t.simulate(drives, steps)
-    kinematic = t.data.qpos[t.dof[t.kinematic]] + t.origin[t.kinematic]
+    skin = t.simulate(drives, 1) * 100
     final = drives[steps - 1]
-    expected = final.targets[: len(t.kinematic)] + final.translation
-    assert np.abs(kinematic - expected).max() < 0.002  # m: within one step's travel of the bone
-
+    bone = t.data.qpos[t.dof[t.kinematic]] + t.origin[t.kinematic]
+    travel = np.abs(translate[-1] - translate[-2]).max() / 100  # m: the bone's last step
+    assert np.abs(bone - (final.targets[: len(t.kinematic)] + final.translation)).max() < 2 * travel
+    over_bone = t.shell.pinned & ~t.shell.rim
+    lag = np.abs(skin[:, over_bone] - translate[:, None] - (skin[0, over_bone] - translate[0])).max()
+    assert 0.001 < lag < 0.3  # cm: the skin over bone moves with it, a little behind
 
 @pytest.mark.slow
 def test_written_capture_imports_with_usdfacedyn(tissue, tmp_path):
