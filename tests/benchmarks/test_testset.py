@@ -113,3 +113,18 @@ def test_written_capture_imports_with_usdfacedyn(tissue, tmp_path):
     assert np.abs(performance.points - take["world"]).max() < 1.0  # cm: tracker noise and pops only
     truth = np.load(tmp_path / "take" / "truth.npz")
     np.testing.assert_allclose(truth["dynamics"], truth["captured"] - truth["quasistatic"], atol=1e-5)
+
+
+def test_score_is_the_fraction_of_the_true_dynamics_left():
+    from testset.score import fraction_left, moving_average_estimate
+
+    rng = np.random.default_rng(0)
+    dynamics = rng.standard_normal((40, 6, 3)).astype(np.float32)
+    truth = {"dynamics": dynamics, "face_vertices": np.array([0, 2, 3])}
+    assert fraction_left(np.zeros_like(dynamics), truth) == pytest.approx(1.0)
+    assert fraction_left(dynamics, truth) == 0.0
+    assert fraction_left(dynamics * 0.5, truth) == pytest.approx(0.5, rel=1e-6)
+    still = np.repeat(rng.standard_normal((1, 6, 3)), 40, axis=0)
+    np.testing.assert_allclose(moving_average_estimate(still, truth), 0.0, atol=1e-9)  # a held shape has no dynamics
+    with pytest.raises(ValueError, match="shape"):
+        fraction_left(np.zeros((40, 5, 3)), truth)
