@@ -7,7 +7,7 @@ heavily smoothed version of itself (forehead, temples, chin) and deep where it b
 of it (cheeks, lips, nose), times a smooth random field per actor. The layer is at most
 `max_depth` deep; its inner nodes are pinned to the bone where it reaches the bone (within
 `pin_gap`), elsewhere they hang over deeper tissue and cavities (mouth, cheeks) and are held
-only by soft "muscle" springs (`TestTissue.muscle_hz`). Nothing here reads facedyn's rigid
+only by soft "muscle" springs (`testset.tissue.TissueParams.muscle_hz`). Nothing here reads facedyn's rigid
 weights or its simulators' layouts: only the rig's neutral, triangles and face region.
 """
 from __future__ import annotations
@@ -130,7 +130,7 @@ def _extrude(points, normals, tri, depth, layers):
     for k in range(layers):
         a, b, c = (sorted_tri[:, j] + k * n for j in range(3))
         a2, b2, c2 = a + n, b + n, c + n
-        # the rule: split each quad face along the diagonal from its smallest vertex index
+        # sorted corners: a shared quad face gets the same diagonal from both prisms (a conforming mesh)
         block = np.stack([np.stack([a, b, c, a2], 1), np.stack([b, c, a2, b2], 1), np.stack([c, a2, b2, c2], 1)], 1)
         tets.append(block.reshape(-1, 4))
         thickness = depth[tri].mean(axis=1) / layers
