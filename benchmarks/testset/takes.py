@@ -55,8 +55,9 @@ def skull_trajectory(recipe: TakeRecipe, data: Path, fps: float) -> SkullTraject
     if kind == "bvh":
         name, _, speed = arg.partition("@")
         speed = float(speed or 1.0)
-        played = motion.from_bvh(data / "cmu-mocap" / name, "Head", duration_s=seconds * speed, fps=fps * speed, seed=recipe.seed)
-        return SkullTrajectory(played.translate, played.orient, fps)  # the same samples, played `speed` times faster
+        # seconds * speed of the capture sampled every speed / fps s, played back every 1 / fps s: `speed` times faster
+        played = motion.from_bvh(data / "cmu-mocap" / name, "Head", duration_s=seconds * speed, fps=fps / speed, seed=recipe.seed)
+        return SkullTrajectory(played.translate, played.orient, fps)
     raise ValueError(f"take {recipe.name}: unknown motion {recipe.motion!r} (platform:HZ or bvh:FILE[@SPEED])")
 
 

@@ -128,3 +128,16 @@ def test_score_is_the_fraction_of_the_true_dynamics_left():
     np.testing.assert_allclose(moving_average_estimate(still, truth), 0.0, atol=1e-9)  # a held shape has no dynamics
     with pytest.raises(ValueError, match="shape"):
         fraction_left(np.zeros((40, 5, 3)), truth)
+
+
+def test_a_faster_mocap_is_the_same_path_in_less_time():
+    from testset.takes import LEAD_S, skull_trajectory
+
+    data = BENCHMARKS.parents[1] / "shared" / "data"
+    if not (data / "cmu-mocap" / "131_02.bvh").is_file():
+        pytest.skip(f"{data}: the shared CMU mocap is not here")
+    normal = skull_trajectory(TakeRecipe("a", "test", "bvh:131_02.bvh", duration_s=1.0, seed=4), data, 60.0)
+    fast = skull_trajectory(TakeRecipe("b", "test", "bvh:131_02.bvh@1.6", duration_s=1.0, seed=4), data, 60.0)
+    assert len(normal.translate) == len(fast.translate) == round((LEAD_S + 1.0) * 60)
+    step = lambda t: np.linalg.norm(np.diff(t.translate, axis=0), axis=1).mean()  # noqa: E731
+    assert step(fast) == pytest.approx(1.6 * step(normal), rel=0.25)
