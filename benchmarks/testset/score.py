@@ -1,0 +1,45 @@
+"""The test set's error figure: the fraction of the true dynamics' RMS that a removal leaves.
+
+The same figure as bench_cross_sim.py and the issue's targets: RMS over the scored vertices
+(the actor's face_vertices in truth.npz) and frames of (estimated dynamics - true dynamics),
+divided by the RMS of the true dynamics (facedyn.evaluation.residual_fraction): doing nothing
+(estimating no dynamics) scores 100 %. Estimates are skull-space offsets in the actor's frame
+(a take stabilized with `--actor` from the actor's rig.usda), as a quasistatic layer holds them.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from facedyn.dynamics.targets import dynamic_offsets
+from facedyn.evaluation import residual_fraction
+
+
+def load_truth(actor: Path, take: str) -> dict:
+    path = Path(actor) / "takes" / take / "truth.npz"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such take's truth (takes are folders under {Path(actor) / 'takes'})")
+    with np.load(path) as data:
+        return {key: data[key] for key in data.files}
+
+
+def fraction_left(estimate: np.ndarray, truth: dict) -> float:
+    """RMS(estimate - true dynamics) / RMS(true dynamics) over the scored vertices."""
+    dynamics = truth["dynamics"]
+    if estimate.shape != dynamics.shape:
+        raise ValueError(f"the estimate has shape {estimate.shape}, the truth {dynamics.shape} (frames, points, 3)")
+    return residual_fraction(estimate, dynamics, dynamics, truth["face_vertices"])["fraction"]
+
+
+def moving_average_estimate(stabilized_points: np.ndarray, truth: dict) -> np.ndarray:
+    """The 21-frame moving average baseline (bench_cross_sim's): the stabilized skin minus its
+    moving average, on the scored vertices (0 elsewhere)."""
+    fv = truth["face_vertices"]
+    estimate = np.zeros_like(truth["dynamics"], dtype=np.float64)
+    estimate[:, fv] = dynamic_offsets(np.asarray(stabilized_points)[:, fv], space="skull")
+    return estimate
+
+
+def dynamics_rms_mm(truth: dict) -> float:
+    return residual_fraction(truth["dynamics"], truth["dynamics"], truth["dynamics"], truth["face_vertices"])["dynamics_rms_cm"] * 10

@@ -1,0 +1,87 @@
+"""Score removals on a test-set actor's test takes (benchmarks/README-testset.md); one JSON file per run.
+
+    .venv/bin/python benchmarks/testset_score.py ACTOR_FOLDER [--removal MODEL [--blend MODEL]] [--work DIR] [--results DIR]
+
+Per test take: `usdfacedyn actor rig.usda`, then `import` + `stabilize --actor` of
+tracked.usdc (the console as a user runs it), and the figures (fraction of the true
+dynamics' RMS left, testset.score): do_nothing (1.0), moving_average (21 frames, on the
+stabilized take) and, with --removal, `usdfacedyn remove --model MODEL [--blend MODEL]`.
+The run's figures, with commit, date and machine, go to RESULTS/<actor>-<UTC time>.json
+(default benchmarks/results/testset/) and to stdout, one JSON object per take.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from plain_capture import stabilize_with_cli, usdfacedyn
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def commit() -> str:
+    done = subprocess.run(["git", "-C", str(REPO), "describe", "--always", "--dirty"], capture_output=True, text=True)
+    return done.stdout.strip() or "unknown"
+
+
+def main() -> None:
+    from facedyn.usd.take import read_layers, read_take
+    from testset.score import dynamics_rms_mm, fraction_left, load_truth, moving_average_estimate
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("actor", type=Path, help="an actor folder written by testset_generate.py")
+    parser.add_argument("--removal", type=Path, help="a removal model to score (usdfacedyn remove --model)")
+    parser.add_argument("--blend", type=Path, help="with --removal: remove --blend (a linear response)")
+    parser.add_argument("--work", type=Path, help="keep the imported takes here (default: a temporary folder)")
+    parser.add_argument("--results", type=Path, default=REPO / "benchmarks" / "results" / "testset")
+    args = parser.parse_args()
+    info_path = args.actor / "actor.json"
+    if not info_path.is_file():
+        sys.exit(f"{args.actor}: not an actor folder (no actor.json); write one with benchmarks/testset_generate.py")
+    info = json.loads(info_path.read_text())
+    tests = [t["name"] for t in info["takes"] if t["kind"] == "test"]
+    if not tests:
+        sys.exit(f"{args.actor}: has no test takes (generate it with --takes test)")
+    run = {"actor": info["actor"]["name"], "split": info["actor"]["split"], "commit": commit(),
+           "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
+           "cpus": os.cpu_count(), "removal": args.removal and str(args.removal), "blend": args.blend and str(args.blend), "takes": []}
+    with tempfile.TemporaryDirectory(prefix="facedyn-testset-") as scratch:
+        work = args.work or Path(scratch)
+        work.mkdir(parents=True, exist_ok=True)
+        actor = work / "actor.usda"
+        if not actor.is_file():
+            usdfacedyn("actor", str(args.actor / "rig.usda"), "-o", str(actor))
+        for name in tests:
+            truth = load_truth(args.actor, name)
+            folder = work / name
+            if not (folder / "take.usda").is_file():
+                folder.mkdir(parents=True, exist_ok=True)
+                stabilize_with_cli(args.actor / "takes" / name / "tracked.usdc", folder, actor)
+            stabilized, _ = read_take(folder / "take.usda")
+            case = {"take": name, "frames": len(truth["dynamics"]), "dynamics_rms_mm": round(dynamics_rms_mm(truth), 3), "do_nothing": 1.0,
+                    "moving_average": round(fraction_left(moving_average_estimate(stabilized.points, truth), truth), 4)}
+            if args.removal is not None:
+                layer = folder / "quasistatic.usdc"
+                usdfacedyn("remove", str(folder / "take.usda"), "-o", str(layer), "--model", str(args.removal),
+                           *(("--blend", str(args.blend)) if args.blend else ()))
+                case["removal"] = round(fraction_left(read_layers([layer, folder / "take.usda"]).offsets, truth), 4)
+            print(json.dumps(case), flush=True)
+            run["takes"].append(case)
+    dialogs = [c for c in run["takes"] if c["take"].startswith("dialog")]
+    if dialogs:
+        run["dialogs_mean"] = {key: round(sum(c[key] for c in dialogs) / len(dialogs), 4) for key in dialogs[0] if key not in ("take", "frames")}
+    args.results.mkdir(parents=True, exist_ok=True)
+    path = args.results / f"{run['actor']}-{run['date'].replace(':', '').replace('+0000', 'Z')}.json"
+    path.write_text(json.dumps(run, indent=1) + "\n")
+    print(json.dumps({"written": str(path)}))
+
+
+if __name__ == "__main__":
+    main()
