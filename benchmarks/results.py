@@ -142,7 +142,7 @@ def render(records: list[dict]) -> str:
              "A figure that needs the simulator's truth, which no capture has, is labelled an upper bound.",
              "Records marked with a source were measured before the benchmarks wrote records and were",
              "carried over from that source with the commit that recorded them.", ""]
-    lines += [f"- [{titles.get(name, (name, ''))[0]}](#{anchor({'id': name, 'benchmark': name, 'case': ''})})" for name in benchmarks]
+    lines += [f"- [{titles.get(name, (name, ''))[0]}](#section-{anchor({'id': name, 'benchmark': name, 'case': ''})})" for name in benchmarks]
     lines.append("")
     for name in benchmarks:
         title, why = titles.get(name, (name, ""))
