@@ -16,7 +16,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "facedyn"
 ARCHITECTURE = ROOT / "docs" / "ARCHITECTURE.md"
-FILE_SUFFIXES = {"usda", "usdc", "usd", "py", "json", "md", "png", "exr", "cl", "bvh", "obj", "csv", "txt", "removal", "synthesis", "response"}
+FILE_SUFFIXES = {"usda", "usdc", "usd", "py", "json", "md", "png", "exr", "cl", "bvh", "obj", "csv", "txt", "cfg", "toml", "ini", "sh", "removal", "synthesis", "response"}
 
 
 class SourceIndex:
