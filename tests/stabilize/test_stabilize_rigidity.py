@@ -132,6 +132,7 @@ def test_rigid_models_merge_and_check_their_shapes():
         stabilize(np.zeros((4, 7, 3)), 120.0, prior=a)
 
 
+@pytest.mark.slow  # the simulator's correlated tracker noise over the whole face, three times
 def test_tracker_noise_components_are_seeded_and_shaped(rig):
     points = np.repeat(rig.neutral[None], 240, axis=0)
     noise = TrackerNoise(temporal_cm=0.01, correlation_s=0.25)
