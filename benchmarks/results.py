@@ -97,7 +97,8 @@ def context_lines(record: dict) -> list[str]:
     lines = [f"- {field}: `{record[field]}`" if field == "command" else f"- {field}: {record[field]}" for field in CONTEXT if record.get(field)]
     obtained = record.get("obtained") or {}
     if obtained:
-        lines.append("- how it was obtained: " + "; ".join(f"{key}: {value}" for key, value in obtained.items()))
+        lines.append("- how it was obtained:")
+        lines += [f"  - {key}: {value}" for key, value in obtained.items()]
     return lines
 
 
