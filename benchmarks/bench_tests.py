@@ -23,12 +23,12 @@ def main() -> int:
     arguments.add_argument("--tier", choices=sorted(TIERS), default="fast")
     args = arguments.parse_args()
     command = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *TIERS[args.tier]]
-    before = load()
-    started = time.perf_counter()
-    result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
-    seconds = time.perf_counter() - started
-    summary = next((line for line in reversed(result.stdout.splitlines()) if re.search(r"\d+ (passed|failed)", line)), "")
     with Recorder("tests", args) as record:
+        before = load()
+        started = time.perf_counter()
+        result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
+        seconds = time.perf_counter() - started
+        summary = next((line for line in reversed(result.stdout.splitlines()) if re.search(r"\d+ (passed|failed)", line)), "")
         record({"case": f"{args.tier} tier", "id": f"tests-{args.tier}", "pytest": " ".join(["python3", *command[1:]]), "seconds": round(seconds, 1),
                 "exit_status": result.returncode, "summary": summary.strip("= "), "load_before": before})
     return result.returncode

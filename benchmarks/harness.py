@@ -70,11 +70,16 @@ def load() -> str:
         return "unknown"
 
 
-def context(benchmark: str, note: str = "") -> dict:
-    """The fields that say where and when a record was measured."""
+def command_line() -> str:
+    """How this benchmark was started, its script relative to the repository."""
     script = Path(sys.argv[0]).resolve()
     argv = [(script.relative_to(ROOT) if script.is_relative_to(ROOT) else script).as_posix()] + sys.argv[1:]
-    fields = {"benchmark": benchmark, "command": "python " + shlex.join(argv), "commit": commit(),
+    return "python " + shlex.join(argv)
+
+
+def context(benchmark: str, note: str = "", at_commit: str | None = None) -> dict:
+    """The fields that say where and when a record was measured (the commit: at_commit, else now)."""
+    fields = {"benchmark": benchmark, "command": command_line(), "commit": at_commit or commit(),
               "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"), "machine": machine(), "load": load()}
     if note:
         fields["note"] = note
@@ -106,11 +111,12 @@ class Recorder:
         self.out = getattr(args, "out", None)
         self.note = getattr(args, "note", "")
         self.records: list[dict] = []
+        self.commit = commit()  # the code measured is the code at the start, whatever is committed meanwhile
 
     def __call__(self, case: dict) -> dict:
         if "case" not in case:
             raise ValueError(f"{self.benchmark}: a record needs a 'case' field, got {sorted(case)}")
-        record = {**context(self.benchmark, self.note), **case}
+        record = {**context(self.benchmark, self.note, self.commit), **case}
         print(json.dumps(record), flush=True)
         self.records.append(record)
         return record
