@@ -5,20 +5,19 @@ small removal model (1 epoch on their true dynamics; its accuracy does not matte
 then runs the steps import, stabilize, remove, preview on every take with 1 and with 2
 worker processes in the same run (workers warmed up first: facedyn imported), and once
 more on 2 workers killing a busy worker (SIGKILL) after the first finished step. Prints one
-JSON object per case:
+JSON object per case (benchmarks/harness.py; --out FILE keeps them for the results page):
 
-    python benchmarks/bench_batch.py --takes 8
+    python benchmarks/bench_batch.py --takes 8 [--out benchmarks/results/batch.json]
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import shutil
 import signal
 import time
 from pathlib import Path
 
+from harness import Recorder, parser
 from spill import scratch_folder
 
 from facedyn.batch.cluster import open_client, run_steps
@@ -31,10 +30,6 @@ from facedyn.sim.default_face import default_face
 from facedyn.usd.corpus import write_simulated_take
 
 STEPS = ("import", "stabilize", "remove", "preview")
-
-
-def emit(record: dict) -> None:
-    print(json.dumps(record), flush=True)
 
 
 def make_shots(folder: Path, takes: int, seconds: float) -> tuple[list[str], Path]:
@@ -80,18 +75,19 @@ def run(captures: list[str], model: Path, out: Path, workers: int, kill: bool) -
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--takes", type=int, default=8)
-    parser.add_argument("--seconds", type=float, default=1.0, help="length of each capture")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--takes", type=int, default=8)
+    arguments.add_argument("--seconds", type=float, default=1.0, help="length of each capture")
+    args = arguments.parse_args()
     scratch = scratch_folder()
     captures, model = make_shots(scratch, args.takes, args.seconds)
     timed = {}
-    for workers in (1, 2):
-        timed[workers] = run(captures, model, scratch / f"out{workers}", workers, kill=False)
-        emit({"case": "throughput", "cores": os.cpu_count(), "capture_seconds": args.seconds, **timed[workers]})
-    emit({"case": "speedup", "workers": [1, 2], "throughput_ratio": round(timed[1]["seconds"] / timed[2]["seconds"], 3)})
-    emit({"case": "worker_killed", "capture_seconds": args.seconds, **run(captures, model, scratch / "killed", 2, kill=True)})
+    with Recorder("bench_batch", args) as emit:
+        for workers in (1, 2):
+            timed[workers] = run(captures, model, scratch / f"out{workers}", workers, kill=False)
+            emit({"case": "throughput", "cores": os.cpu_count(), "capture_seconds": args.seconds, **timed[workers]})
+        emit({"case": "speedup", "workers": [1, 2], "throughput_ratio": round(timed[1]["seconds"] / timed[2]["seconds"], 3)})
+        emit({"case": "worker_killed", "capture_seconds": args.seconds, **run(captures, model, scratch / "killed", 2, kill=True)})
 
 
 if __name__ == "__main__":

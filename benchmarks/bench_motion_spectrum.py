@@ -10,17 +10,16 @@ between 6 and 15 Hz, and the RMS of each. Sources: every procedural gait of face
 averaged over seeds, and the CMU clips in ../shared/data when it is there (whole clips,
 resampled to 120 fps as `simulate` reads them).
 
-    python benchmarks/bench_motion_spectrum.py [--seconds 6] [--seeds 4]
+    python benchmarks/bench_motion_spectrum.py [--seconds 6] [--seeds 4] [--out benchmarks/results/motion_spectrum.json]
 """
 from __future__ import annotations
 
-import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 from facedyn import motion
+from harness import Recorder, parser
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 FPS = 120.0
@@ -44,22 +43,23 @@ def describe(trajectory: motion.SkullTrajectory) -> dict:
             "angular_rms_rad_s2": float(np.sqrt(np.mean(np.sum(angular**2, axis=1))))}
 
 
-def emit(source: str, rows: list[dict], **extra) -> None:
+def summary(source: str, rows: list[dict], **extra) -> dict:
     mean = {key: round(float(np.mean([r[key] for r in rows])), 3) for key in rows[0]}
-    print(json.dumps({"source": source, "band_hz": list(BAND_HZ), **mean, **extra}), flush=True)
+    return {"case": source, "band_hz": list(BAND_HZ), **mean, **extra}
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=6.0, help="length of each procedural take")
-    parser.add_argument("--seeds", type=int, default=4, help="procedural takes per source (the mean is printed)")
-    args = parser.parse_args()
-    for kind in GAITS:
-        for impacts in (False, True):
-            rows = [describe(getattr(motion, kind)(args.seconds, FPS, seed, impacts=impacts)) for seed in range(args.seeds)]
-            emit(f"{kind}{' + impacts' if impacts else ''}", rows, seeds=args.seeds, seconds=args.seconds)
-    for clip in sorted((DATA / "cmu-mocap").glob("*.bvh")) if DATA.is_dir() else []:
-        emit(f"CMU {clip.stem}", [describe(motion.from_bvh(clip, fps=FPS))], seconds="whole clip")
+    arguments = parser(__doc__)
+    arguments.add_argument("--seconds", type=float, default=6.0, help="length of each procedural take")
+    arguments.add_argument("--seeds", type=int, default=4, help="procedural takes per source (the mean is printed)")
+    args = arguments.parse_args()
+    with Recorder("bench_motion_spectrum", args) as emit:
+        for kind in GAITS:
+            for impacts in (False, True):
+                rows = [describe(getattr(motion, kind)(args.seconds, FPS, seed, impacts=impacts)) for seed in range(args.seeds)]
+                emit(summary(f"{kind}{' + impacts' if impacts else ''}", rows, seeds=args.seeds, seconds=args.seconds))
+        for clip in sorted((DATA / "cmu-mocap").glob("*.bvh")) if DATA.is_dir() else []:
+            emit(summary(f"CMU {clip.stem}", [describe(motion.from_bvh(clip, fps=FPS))], seconds="whole clip"))
 
 
 if __name__ == "__main__":

@@ -5,6 +5,7 @@ command cannot leave the demo behind; this test is what notices if it does.
 """
 import json
 
+import pytest
 import torch
 
 from facedyn.cli import main
@@ -15,6 +16,8 @@ from facedyn.dynamics.skull_motion import NAMED
 from facedyn.processors.training_inputs import take_skull_frame
 from facedyn.usd.actor import read_actor
 from facedyn.usd.take import read_take
+
+pytestmark = pytest.mark.slow  # trains F and H and runs the whole demo
 
 
 def test_the_demo_runs_the_recommended_path_end_to_end_and_beats_doing_nothing(tmp_path, capsys):

@@ -62,6 +62,7 @@ def test_readme_describes_every_script():
         assert script in readme
 
 
+@pytest.mark.slow  # each script runs the CLI; 03-05 train networks
 @pytest.mark.parametrize("script", list(SCRIPTS))
 def test_example_runs(script, work):
     result = run_example(script, work)

@@ -77,6 +77,7 @@ def layer_stack(take_folder: Path) -> list[tuple[str, str]]:
     return [(Path(layer["layer"]).name, layer["processor"]) for layer in describe_take(take_folder / "take.usda")["layers"][1:]]
 
 
+@pytest.mark.slow  # a Dask cluster runs four steps on three takes, twice
 def test_a_batch_completes_and_a_rerun_skips_every_step(shots, client, tmp_path):
     out = tmp_path / "out"
     models = Models(shots / "actor.removal", shots / "actor.synthesis", "hop")
@@ -103,6 +104,7 @@ def test_a_batch_completes_and_a_rerun_skips_every_step(shots, client, tmp_path)
     assert set(statuses(forced).values()) == {"ok"}
 
 
+@pytest.mark.slow  # a local Dask cluster runs the steps
 def test_a_bad_capture_fails_alone_with_its_error_and_exit_code(shots, tmp_path, capsys):
     args = batch_args(str(shots / "shot2.usdc"), str(shots / "broken.usdc"), str(shots / "missing.usdc"), "-o", str(tmp_path / "out"),
                       "--steps", "import,stabilize", "--workers", "2", "--json")
@@ -141,6 +143,7 @@ def tree_checksums(folder: Path) -> dict[str, str]:
             for p in sorted(folder.rglob("*")) if p.is_file() and p.name != "corpus.json"}
 
 
+@pytest.mark.slow  # simulates a corpus on one and two workers
 def test_simulate_on_the_cluster_writes_the_same_bytes_with_one_or_two_workers(rig, client, tmp_path):
     specs = [TakeSpec(f"take{i}", motion, "smile", duration_s=0.3, seed=i) for i, motion in enumerate(("walk", "hop", "platform:9"))]
     specs.insert(1, TakeSpec("unreadable", "still", dialog=str(tmp_path / "missing.csv"), duration_s=0.3))  # skipped, recorded
@@ -156,6 +159,7 @@ def test_simulate_on_the_cluster_writes_the_same_bytes_with_one_or_two_workers(r
     assert (one["jobs"], two["jobs"]) == (1, 2)
 
 
+@pytest.mark.slow  # a Dask cluster runs the steps while a worker is killed
 def test_killing_a_worker_mid_batch_still_completes_every_take(shots, client, tmp_path):
     """Runs last in this module: the killed worker's nanny starts a new one."""
     pids = client.run(os.getpid)

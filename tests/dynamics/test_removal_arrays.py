@@ -59,6 +59,7 @@ def trained(corpus):
     return model, curve
 
 
+@pytest.mark.slow  # trains F for 30 epochs
 def test_training_reaches_a_low_validation_error(trained):
     model, curve = trained
     val = model.info["validation"]
@@ -75,6 +76,7 @@ def test_training_is_seeded(corpus):
     assert a.info["loss_curve"] == b.info["loss_curve"]
 
 
+@pytest.mark.slow  # trains F for 30 epochs
 def test_removal_recovers_the_held_expression(trained, corpus, tmp_path):
     face, takes, truth = corpus
     model = load_model(save_model(trained[0], tmp_path / "f.fdyn"), topology=face.topology, fps=FPS)
@@ -148,6 +150,7 @@ def test_bad_input_is_a_clear_error(random_model, corpus):
         train_removal([TrainingSequence("short", take["points"][:15], FPS, take["translate"][:15], take["orient"][:15], "world")], face)
 
 
+@pytest.mark.slow  # trains F for 30 epochs
 def test_true_targets_recover_slow_dynamics_the_moving_average_cannot_see(corpus):
     """Platforms at 1.5-2.5 Hz drive the 5 Hz tissue below resonance: its offsets change
     slowly, so the 21-frame moving average keeps most of them and its targets miss them;

@@ -54,6 +54,7 @@ def rms(values) -> float:
     return float(np.sqrt(np.mean(np.square(values, dtype=np.float64))))
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 def test_held_expressions_give_the_response_that_the_true_dynamics_give(rig, session, template, response):
     """Without truth (each take's held shape and its sag that turns with the head projected
     out), the fit predicts a new motion with a changing expression as well as the same fit on
@@ -75,6 +76,7 @@ def test_held_expressions_give_the_response_that_the_true_dynamics_give(rig, ses
     assert 0 < left < 0.7  # measured 0.48: 3 s takes, each motion seen once
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 def test_the_session_chooses_how_hard_the_response_is_penalized(session, template, response):
     """Each candidate ridge is cross-validated on the session and the one leaving the least of
     the left-out takes' motion is kept: a session tracked with far more noise asks for a
@@ -95,6 +97,7 @@ def test_the_session_chooses_how_hard_the_response_is_penalized(session, templat
         fit_linear_response(template, [as_take(session[0])], ridge=0.0)
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 def test_motion_left_beyond_sag_is_what_a_removal_leaves_of_held_takes(session):
     """On held takes the true quasistatic skin is the held shape plus a sag that follows the
     head, so the true removal leaves nothing, no removal leaves everything, half of it half."""
@@ -114,6 +117,7 @@ def test_motion_left_beyond_sag_is_what_a_removal_leaves_of_held_takes(session):
     assert left([0.5 * o for o in offsets]) == pytest.approx(0.5, abs=0.02)
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 def test_the_response_is_zero_at_rest_and_survives_the_model_file(rig, session, template, response, tmp_path):
     path = tmp_path / "actor.synthesis"
     save_model(response, path)
@@ -132,6 +136,7 @@ def test_the_response_is_zero_at_rest_and_survives_the_model_file(rig, session, 
     assert [t["name"] for t in loaded.info["calibration"]["takes"]] == [s.spec.name for s in session]
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 def test_refusals_name_the_problem(session, template):
     with pytest.raises(ValueError, match="needs a synthesis model"):
         removal = DynamicsModel(kind="removal", network=Network(removal_spec(315, 63)), face=template.face, fps=FPS,
@@ -144,6 +149,7 @@ def test_refusals_name_the_problem(session, template):
         fit_linear_response(template, [])
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 def test_the_translation_kernel_is_the_response_to_an_acceleration_impulse(rig, session, template, response):
     """translation_kernel reads, from the response's weights, what synthesis gives for a skull
     that takes one unit acceleration impulse along each axis: the load a moving expression
@@ -165,6 +171,7 @@ def test_the_translation_kernel_is_the_response_to_an_acceleration_impulse(rig, 
         assert np.abs(offsets[impulse + past + 1:]).max() < 1e-6 * np.abs(expected).max()
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 def test_the_response_removes_the_expression_s_own_inertia(rig, session, template, response):
     """Tissue loaded by its own expression's acceleration (facedyn.sim.tissue with
     expression_inertia 1; the session holds its expressions, so the fit never saw that load):
@@ -194,6 +201,7 @@ def test_the_response_removes_the_expression_s_own_inertia(rig, session, templat
     np.testing.assert_allclose(offsets, synthesized, atol=1e-6)
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 def test_the_response_synthesizes_the_expression_s_own_inertia(rig, response):
     """Synthesis answers the quasistatic skin's own acceleration as removal answers the
     capture's: on tissue loaded by its expression, with the head still, the response predicts
@@ -223,6 +231,7 @@ def test_the_response_synthesizes_the_expression_s_own_inertia(rig, response):
     assert round_trip["with"] < round_trip["skull alone"] - 0.05
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 @pytest.mark.parametrize("stiffening", [5.0, 0.0])
 def test_the_response_carries_the_tissue_s_stiffening(rig, template, stiffening, monkeypatch):
     """On tissue of the other simulator family that stiffens with strain, the session's fit
@@ -256,6 +265,7 @@ def test_the_response_carries_the_tissue_s_stiffening(rig, template, stiffening,
         assert abs(left(stiffened) - left(linear)) < 0.005  # measured 0.282 / 0.283
 
 
+@pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
 def test_a_damaged_stiffening_record_is_a_clear_error(session, template):
     import copy
 

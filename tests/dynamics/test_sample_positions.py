@@ -46,6 +46,7 @@ def removal_error(face, takes, positions: bool) -> tuple[float, object]:
     return float(error), model
 
 
+@pytest.mark.slow  # trains F for 20 epochs, with and without positions
 def test_positions_tell_f_which_sample_it_removes_from(noisy_slow_takes, tmp_path):
     face, takes = noisy_slow_takes
     without, plain = removal_error(face, takes, positions=False)

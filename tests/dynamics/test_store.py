@@ -97,6 +97,7 @@ def test_prepared_rows_equal_the_whole_take_features(corpus, monkeypatch):
     np.testing.assert_allclose(skin, whole.skin[keep], atol=1e-3)
 
 
+@pytest.mark.slow  # trains F for 20 epochs three times
 def test_streamed_training_matches_training_in_memory(corpus, tmp_path):
     """One resident chunk is the in-memory trainer; chunks of 1 MB shuffle by blocks and
     land within a few percent of it, with identical normalization."""

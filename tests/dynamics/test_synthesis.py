@@ -73,6 +73,7 @@ def rms(values) -> float:
     return float(np.sqrt(np.mean(np.square(values, dtype=np.float64))))
 
 
+@pytest.mark.slow  # simulates a 16-take corpus and trains H on it
 def test_h_reproduces_held_out_dynamics_far_better_than_zero(trained, corpus, face):
     held = corpus[-1]
     points, offsets = synthesize_dynamics(held.quasistatic, held.skull_translate, held.skull_orient, FPS, trained, "numpy")
@@ -90,6 +91,7 @@ def test_h_reproduces_held_out_dynamics_far_better_than_zero(trained, corpus, fa
     assert len(trained.info["loss_curve"]) == 20
 
 
+@pytest.mark.slow  # simulates a 16-take corpus and trains H on it
 def test_a_still_skull_gets_almost_no_dynamics(trained, corpus):
     held = corpus[-1]
     frames = len(held.quasistatic)
@@ -102,6 +104,7 @@ def test_a_still_skull_gets_almost_no_dynamics(trained, corpus):
     assert rms(offsets) < 0.06 * rms(held.offsets[INNER])
 
 
+@pytest.mark.slow  # simulates a 16-take corpus and trains H on it
 def test_model_round_trip_and_refusals(trained, corpus, face, rig, tmp_path):
     path = save_model(trained, tmp_path / "h.fdyn")
     loaded = load_model(path, topology=face.topology, fps=FPS)
@@ -134,6 +137,7 @@ def test_model_round_trip_and_refusals(trained, corpus, face, rig, tmp_path):
         synthesize_dynamics(held.quasistatic, held.skull_translate, held.skull_orient, FPS, loaded)
 
 
+@pytest.mark.slow  # simulates a 16-take corpus and trains H on it
 @requires_opencl
 def test_opencl_stretch_gives_the_same_synthesis(trained, corpus):
     held = corpus[-1]
@@ -142,6 +146,7 @@ def test_opencl_stretch_gives_the_same_synthesis(trained, corpus):
     np.testing.assert_allclose(a, b, atol=1e-3 * np.abs(a).max())
 
 
+@pytest.mark.slow  # simulates a 16-take corpus and trains H on it
 def test_removal_model_source_equals_its_quasistatic_given(corpus, face, rig):
     """Source (a), F's quasistatic output, trains exactly like passing that output as y."""
     torch.manual_seed(2)
@@ -156,6 +161,7 @@ def test_removal_model_source_equals_its_quasistatic_given(corpus, face, rig):
     np.testing.assert_allclose(losses[0], losses[1], rtol=1e-5)
 
 
+@pytest.mark.slow  # simulates a 16-take corpus and trains H on it
 def test_bad_training_input_is_a_clear_error(corpus, face, rig, trained):
     takes = [as_take(s) for s in corpus[:2]]
     truth = {s.spec.name: s.quasistatic for s in corpus[:2]}
@@ -221,6 +227,7 @@ def test_aligned_trajectory_moves_b_like_a(rig):
         align_trajectory(t_a, q_a, a, b, start=(np.zeros(3),))
 
 
+@pytest.mark.slow  # simulates a 16-take corpus and trains H on it
 def test_delta_transfer_copies_offsets_exactly(corpus, rig):
     source = corpus[2]
     target = rig.make_actor(seed=1).evaluate(corpus[7].weights)
@@ -237,6 +244,7 @@ def test_delta_transfer_copies_offsets_exactly(corpus, rig):
         delta_transfer(source.offsets, target, 2 * rot)
 
 
+@pytest.mark.slow  # simulates a 16-take corpus and trains H on it
 def test_calibration_moves_h_to_another_actors_tissue(trained, rig):
     """H trained on one tissue, calibrated on a few held-expression takes of a softer, less
     damped one (their y(t) given), predicts that tissue's held-out take much better; the

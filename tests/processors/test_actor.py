@@ -108,6 +108,7 @@ def import_with_actor(cache, shot, actor):
     return shot / "take.usda"
 
 
+@pytest.mark.slow  # imports, stabilizes and trains on the actor's takes
 def test_import_records_the_actor_and_stabilize_and_the_trainers_use_it(rig_and_takes, tmp_path):
     from facedyn.dynamics.modelfile import load_model
     from facedyn.performance import skull_frame_id

@@ -28,6 +28,7 @@ def take(tmp_path_factory):
     return folder / "walk"
 
 
+@pytest.mark.slow  # stabilizes, trains on or writes a 3 s take several ways
 def test_streamed_stabilize_equals_the_in_memory_chunked_solve(take, tmp_path):
     out = tmp_path / "stabilized.usdc"
     assert cli("stabilize", take / "take.usda", "-o", out, "--chunk-frames", "128", "--chunk-overlap", "16") == 0
@@ -47,6 +48,7 @@ def test_streamed_stabilize_equals_the_in_memory_chunked_solve(take, tmp_path):
     np.testing.assert_allclose(perf.solve_error, expected.solve_error, atol=1e-5)
 
 
+@pytest.mark.slow  # stabilizes, trains on or writes a 3 s take several ways
 def test_a_long_layer_is_written_as_value_clips_that_compose_like_one_layer(take, tmp_path, monkeypatch):
     one = tmp_path / "one" / "stabilized.usdc"
     clipped = tmp_path / "clipped" / "stabilized.usdc"
@@ -138,6 +140,7 @@ def test_a_write_sweeps_temporaries_of_dead_writers_only(tmp_path):
         live.wait()
 
 
+@pytest.mark.slow  # stabilizes, trains on or writes a 3 s take several ways
 def test_streamed_remove_and_synthesize_equal_the_whole_take(take, tmp_path, monkeypatch):
     from facedyn.dynamics.modelfile import load_model
     from facedyn.dynamics.removal import remove_dynamics
@@ -169,6 +172,7 @@ def test_streamed_remove_and_synthesize_equal_the_whole_take(take, tmp_path, mon
     np.testing.assert_allclose(synthesized.offsets, offsets, atol=2e-6)
 
 
+@pytest.mark.slow  # stabilizes, trains on or writes a 3 s take several ways
 @pytest.mark.parametrize("mask, rest", [("all", "estimate"), ("rigid", "estimate")], ids=["plain-capture", "estimated-rest"])
 def test_a_long_take_is_solved_against_one_rest_and_mask_found_on_a_frame_sample(take, tmp_path, mask, rest):
     from facedyn.stabilize.schedule import Schedule

@@ -17,6 +17,8 @@ from facedyn.sim.default_face import default_face
 from facedyn.usd.corpus import build_corpus, read_truth
 from facedyn.usd.take import read_take, read_take_below
 
+pytestmark = pytest.mark.slow  # every test reads the module's corpus and the F and H trained on it
+
 
 def cli(*argv):
     quiet = "--json" if argv[0] in ("train-removal", "train-synthesis") else "-q"

@@ -2,6 +2,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from facedyn.cli import main
 from facedyn.usd.corpus import read_truth
@@ -11,6 +12,7 @@ def cli(*argv):
     return main([str(a) for a in argv] + ["-q"])
 
 
+@pytest.mark.slow  # simulates a gait take with and without jolts
 def test_simulate_impacts_jolts_the_gait_takes_and_records_it(tmp_path):
     for name, flag in (("smooth", "false"), ("jolted", "true")):
         assert cli("simulate", "-o", tmp_path / name, "--scale", "demo", "--only", "smile_walk", "--impacts", flag, "--jobs", "1") == 0

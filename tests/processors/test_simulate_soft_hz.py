@@ -11,6 +11,7 @@ def cli(*argv):
     return main([str(a) for a in argv] + ["-q"])
 
 
+@pytest.mark.slow  # simulates a randomized corpus
 def test_simulate_draws_tissue_from_the_given_band_and_records_it(tmp_path):
     assert cli("simulate", "-o", tmp_path / "c", "--scale", "demo", "--only", "smile_platform*", "--randomize-tissue", "take",
                "--soft-hz", "6-6.5", "--jobs", "1", "--seed", "3") == 0

@@ -34,6 +34,7 @@ def take(small_bone, tmp_path_factory):
     return folder / SPEC.name
 
 
+@pytest.mark.slow  # simulates a 3 s talking take and stabilizes it twice
 @pytest.mark.parametrize("chunk_frames", [4096, 128], ids=["whole", "streamed"])
 def test_stabilize_finds_the_bone_under_a_sliding_block(small_bone, take, tmp_path, capsys, chunk_frames):
     capture, _ = read_take(take / "capture.usdc")

@@ -56,6 +56,7 @@ def test_randomized_tissue_is_drawn_per_take_or_per_corpus_from_the_seeds():
         protocol(rig, "demo", physics="fem")
 
 
+@pytest.mark.slow  # simulates corpora
 def test_a_randomized_corpus_is_the_same_whatever_the_number_of_workers():
     rig = small_face()
     specs = [replace(s, duration_s=0.25) for s in protocol(rig, "demo", seed=2, randomize_tissue="take") if s.motion in ("walk", "hop")][:2]
@@ -68,6 +69,7 @@ def test_a_randomized_corpus_is_the_same_whatever_the_number_of_workers():
     assert not np.allclose(default.offsets, alone[0].offsets)  # the random actor is another tissue
 
 
+@pytest.mark.slow  # simulates corpora
 def test_a_take_can_carry_the_other_physics():
     rig = small_face()
     spec = TakeSpec("walk", "walk", "jaw_open", duration_s=0.4, seed=3)

@@ -189,6 +189,7 @@ def test_thinner_tissue_rings_higher():
         thin.attachment_hz(weights)
 
 
+@pytest.mark.slow  # simulates seconds of springs several times over
 def test_inertial_loads_match_an_independent_integration():
     """Translation, rotation (Euler, Coriolis, centrifugal) and turning gravity at once,
     against scipy's adaptive integrator on the skull-frame equations of a few vertices."""
@@ -413,6 +414,7 @@ def test_one_step_per_frame_agrees_with_finer_steps(patch):
     assert np.abs(runs[2] - runs[8]).max() < 0.005 * scale
 
 
+@pytest.mark.slow  # simulates seconds of springs several times over
 @pytest.mark.parametrize("normal_ratio, saving", [(1.0, 5), (2.5, 2), (4.0, 1)])
 def test_stiffness_drift_correction_matches_refactorizing(patch, normal_ratio, saving):
     """The explicit gain-drift correction stays as accurate as refactorizing every step; a
@@ -429,6 +431,7 @@ def test_stiffness_drift_correction_matches_refactorizing(patch, normal_ratio, s
     assert np.abs(lazy.offsets - eager.offsets).max() < 0.01 * np.abs(eager.offsets).max()
 
 
+@pytest.mark.slow  # simulates seconds of springs several times over
 def test_a_held_expression_on_springs_stiff_along_the_normal_stays_stable():
     """An expression eased in and then held leaves the factorization's gain behind. On the
     built-in face with springs 3.8x stiffer along the normal (TissueParams.random(13), the

@@ -87,6 +87,7 @@ def test_rigid_translation_leaves_no_deformation_after_transients(sheet):
     assert np.abs(result.dynamics[-30:]).max() < 1e-3 * peak
 
 
+@pytest.mark.slow  # simulates the volumetric layer for seconds
 def test_static_sag_matches_the_shear_layer_estimate(sheet):
     """A 6 degree roll turns gravity along the slab: the centre sags rho g h^2 / (2 mu),
     the dynamics settle onto that sag, and the sag is zero on the held border."""
@@ -108,6 +109,7 @@ def test_static_sag_matches_the_shear_layer_estimate(sheet):
     assert not np.any(result.gravity_sag[:, weights == 1])
 
 
+@pytest.mark.slow  # simulates the volumetric layer for seconds
 def test_newton_steps_find_the_sag_where_chord_iterations_stop_short(sheet, monkeypatch):
     """Where the chord iterations on the rest tangent do not converge (cut to one here; on a
     stiffened layer they can cycle), projected Newton steps from the same start find the same
@@ -135,6 +137,7 @@ def test_a_gravity_sag_that_does_not_converge_is_an_error(sheet, monkeypatch):
         simulate(held(points, frames), tris, np.zeros((frames, 3)), orient, FPS, flat(), rigid_weights=weights)
 
 
+@pytest.mark.slow  # simulates the volumetric layer for seconds
 def test_a_push_rings_down_at_the_stated_frequency(sheet):
     points, tris, weights = sheet
     frames = 300
@@ -147,6 +150,7 @@ def test_a_push_rings_down_at_the_stated_frequency(sheet):
         assert measured == pytest.approx(hz, rel=0.1), (hz, measured)
 
 
+@pytest.mark.slow  # simulates the volumetric layer for seconds
 def test_energy_decays_at_the_damping_rate(sheet):
     """Newmark average acceleration conserves a linear layer's energy; Kelvin-Voigt
     viscosity takes it away at about 2 zeta omega per second."""
@@ -237,6 +241,7 @@ def face():
     return default_face(resolution=18)  # coarser than the default: the same face, half the points
 
 
+@pytest.mark.slow  # simulates the volumetric layer for seconds
 def test_the_built_in_face_rings_in_the_stated_band(face):
     """On the face the soft regions are held by thinner tissue around them: the ring-down
     peak lies at 1.0-1.3 x soft_hz (about 1.15 x), i.e. 5-9 Hz for VolumetricParams.random's range."""
@@ -248,6 +253,7 @@ def test_the_built_in_face_rings_in_the_stated_band(face):
     assert 6.0 <= measured <= 1.3 * 6.0, measured
 
 
+@pytest.mark.slow  # simulates the volumetric layer for seconds
 def test_the_two_physics_agree_in_order_of_magnitude_only(face):
     """A 9 Hz platform: both physics give dynamics of the same order, not the same field."""
     from facedyn import motion

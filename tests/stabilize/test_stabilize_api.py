@@ -51,6 +51,7 @@ def one_torch_thread():
     torch.set_num_threads(threads)
 
 
+@pytest.mark.slow  # runs the reference solver / a long take
 def test_fast_and_reference_reach_the_same_energy(one_torch_thread):
     """Same energy, same schedule: the two L-BFGS runs take different paths through a
     non-convex landscape, so single takes land within a few 0.1% of each other either
@@ -67,6 +68,7 @@ def test_fast_and_reference_reach_the_same_energy(one_torch_thread):
     assert np.mean(gaps) < 5e-3
 
 
+@pytest.mark.slow  # runs the reference solver / a long take
 def test_long_takes_in_chunks_match_one_solve():
     long = synthetic_take(frames=420, vertices=200, fps=120.0, seed=5)
     whole = stabilize(long.world, long.fps, rest=long.rest)

@@ -15,6 +15,7 @@ def vertex_errors(result, take):
     return np.linalg.norm(result.skull_points - take.skull, axis=-1)
 
 
+@pytest.mark.slow  # solves a take whole and in chunks
 def test_a_chunked_solve_is_as_accurate_as_the_whole_take_and_close_to_it(take):
     whole = stabilize(take.world, take.fps, rest=take.rest, chunk_frames=len(take.world))
     chunked = stabilize(take.world, take.fps, rest=take.rest, chunk_frames=192, chunk_overlap=32)

@@ -47,6 +47,7 @@ def errors(rig, take, result):
                                 take.quasistatic + take.offsets, rig.face_vertices)
 
 
+@pytest.mark.slow  # simulates talking takes and stabilizes them several ways
 def test_discovered_weights_separate_bone_from_soft_tissue(rig, talking):
     take, tracked = talking
     model = estimate_rigidity(tracked.points)
@@ -56,6 +57,7 @@ def test_discovered_weights_separate_bone_from_soft_tissue(rig, talking):
     assert model.noise_cm == pytest.approx(2.5 * np.sqrt(0.01**2 + 0.004**2 + 0.002**2), rel=0.3)  # 90 % of |3D normal|
 
 
+@pytest.mark.slow  # simulates talking takes and stabilizes them several ways
 def test_no_mask_stabilization_beats_the_old_default_and_nears_the_oracle(rig, talking):
     take, tracked = talking
     world = tracked.points
@@ -68,6 +70,7 @@ def test_no_mask_stabilization_beats_the_old_default_and_nears_the_oracle(rig, t
     assert discovered["mean_vertex_cm"] <= 1.5 * oracle["mean_vertex_cm"]
 
 
+@pytest.mark.slow  # simulates takes and stabilizes them
 def test_pops_and_dropped_frames_do_not_move_the_skull(rig):
     spec = TakeSpec("smile", "walk", "smile", duration_s=1.5, seed=9)
     clean_take, clean = capture(rig, spec)
@@ -97,6 +100,7 @@ def test_nan_frames_count_as_dropped_but_partial_nan_is_an_error(rig):
         stabilize(bad, 120.0)
 
 
+@pytest.mark.slow  # simulates takes and stabilizes them
 def test_a_prior_puts_two_takes_in_one_skull_frame(rig):
     first, tracked_first = capture(rig, TakeSpec("brows", "walk", "brow_raise", duration_s=1.0, seed=21))
     actor = stabilize(tracked_first.points, 120.0).model
@@ -128,6 +132,7 @@ def test_rigid_models_merge_and_check_their_shapes():
         stabilize(np.zeros((4, 7, 3)), 120.0, prior=a)
 
 
+@pytest.mark.slow  # the simulator's correlated tracker noise over the whole face, three times
 def test_tracker_noise_components_are_seeded_and_shaped(rig):
     points = np.repeat(rig.neutral[None], 240, axis=0)
     noise = TrackerNoise(temporal_cm=0.01, correlation_s=0.25)
@@ -144,6 +149,7 @@ def test_tracker_noise_components_are_seeded_and_shaped(rig):
         TrackerNoise(drop_mode="hold")
 
 
+@pytest.mark.slow  # simulates takes and stabilizes them
 def test_an_actors_neutral_as_prior_is_still_checked_for_rigidity_per_take(rig, talking):
     """An actor that knows only its neutral (every vertex a candidate): the take keeps the neutral as its rest (the
     actor's skull frame) and its own data rules out the vertices that move (the jaw opening and closing)."""

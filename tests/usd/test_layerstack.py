@@ -212,6 +212,7 @@ def test_a_failed_attach_keeps_a_layer_that_was_there_before(tmp_path):
     assert existing.exists()
 
 
+@pytest.mark.slow  # fifty processes attach to one take at once
 def test_fifty_concurrent_attaches_lose_nothing(tmp_path):
     root = build_take(tmp_path)
     variants = [write_role_layer(root, f"synthesized.v{k:02d}.usdc", "synthesized", value=3 + k / 100) for k in range(50)]
