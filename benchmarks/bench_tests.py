@@ -29,8 +29,9 @@ def main() -> int:
         result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
         seconds = time.perf_counter() - started
         summary = next((line for line in reversed(result.stdout.splitlines()) if re.search(r"\d+ (passed|failed)", line)), "")
+        failed = [line.split()[1] for line in result.stdout.splitlines() if line.startswith(("FAILED ", "ERROR "))]
         record({"case": f"{args.tier} tier", "id": f"tests-{args.tier}", "pytest": " ".join(["python3", *command[1:]]), "seconds": round(seconds, 1),
-                "exit_status": result.returncode, "summary": summary.strip("= "), "load_before": before})
+                "exit_status": result.returncode, "summary": summary.strip("= "), "load_before": before, **({"failed": failed} if failed else {})})
     return result.returncode
 
 
