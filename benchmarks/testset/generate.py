@@ -76,8 +76,9 @@ def expression_basis(rig: FaceRig) -> np.ndarray:
     return rig.evaluate(np.eye(rig.expression_count, dtype=np.float32)) - rig.neutral[None]
 
 
-def simulate_take(rig: FaceRig, tissue: MujocoTissue, recipe: TakeRecipe, data: Path, fps: float = FPS, substeps: int = SUBSTEPS) -> dict:
-    """One take's capture (world cm) and truth arrays, the lead-in cut off."""
+def simulate_take(rig: FaceRig, tissue: MujocoTissue, recipe: TakeRecipe, data: Path, fps: float = FPS) -> dict:
+    """One take's capture (world cm) and truth arrays, the lead-in cut off; the tissue's step rate is a multiple of `fps`."""
+    substeps = int(round(1.0 / (fps * tissue.model.opt.timestep)))
     rate = fps * substeps
     trajectory = skull_trajectory(recipe, data, rate)
     steps = len(trajectory.translate)
@@ -158,7 +159,7 @@ def generate_actor(spec: ActorSpec, out: Path, data: Path, which: tuple[str, ...
         info = {"actor": asdict(spec), "simulator": f"MuJoCo {tissue.mujoco.__version__} flex (dim 3), testset.tissue",
                 "tissue": asdict(tissue.params), "shell": {"nodes": len(shell.nodes), "tetrahedra": len(shell.tets), "skin_vertices": len(shell.skin),
                                                            "pinned_columns": int(shell.pinned.sum()), "muscle_columns": int((~shell.pinned).sum())},
-                "fps": FPS, "substeps": SUBSTEPS, "lead_in_s": LEAD_S, "rig": {"name": rig.name, "points": rig.point_count},
+                "fps": FPS, "substeps": SUBSTEPS[spec.face], "lead_in_s": LEAD_S, "rig": {"name": rig.name, "points": rig.point_count},
                 "takes": takes, "seconds": round(time.perf_counter() - started, 1), "jobs": jobs, "machine": platform.node(), "cpus": os.cpu_count()}
         (scratch / "actor.json").write_text(json.dumps(info, indent=1) + "\n")
         scratch.rename(out)
@@ -176,7 +177,7 @@ def _init_worker(spec: ActorSpec, data: Path) -> None:
     global _worker
     rig = actor_rig(spec, data)
     _worker = (rig, MujocoTissue(rig.neutral, rig.topology.triangles(), rig.face_vertices, TissueParams.random(spec.tissue_seed),
-                                 1.0 / (FPS * SUBSTEPS)))
+                                 1.0 / (FPS * SUBSTEPS[spec.face])))
 
 
 def _simulate_in_worker(recipe: TakeRecipe, data: Path) -> tuple[TakeRecipe, dict, float]:

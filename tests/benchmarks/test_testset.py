@@ -54,8 +54,8 @@ def test_shell_is_a_valid_tetrahedral_layer_with_both_attachments(tissue):
 def test_generation_is_deterministic(tissue):
     rig, t = tissue
     recipe = TakeRecipe("t", "test", "platform:8", expression="jaw_open", duration_s=0.25, seed=3)
-    a = simulate_take(rig, t, recipe, Path("."), FPS, SUBSTEPS)
-    b = simulate_take(rig, t, recipe, Path("."), FPS, SUBSTEPS)
+    a = simulate_take(rig, t, recipe, Path("."), FPS)
+    b = simulate_take(rig, t, recipe, Path("."), FPS)
     for key in ("captured", "quasistatic", "dynamics"):
         np.testing.assert_array_equal(a[key], b[key])
     assert np.abs(a["dynamics"]).max() > 1e-3  # a platform at 8 Hz moves the tissue (cm)
@@ -103,7 +103,7 @@ def test_written_capture_imports_with_usdfacedyn(tissue, tmp_path):
 
     rig, t = tissue
     recipe = TakeRecipe("t", "test", "platform:6", expression="jaw_open", duration_s=0.3, seed=5)
-    take = simulate_take(rig, t, recipe, Path("."), FPS, SUBSTEPS)
+    take = simulate_take(rig, t, recipe, Path("."), FPS)
     write_take(tmp_path / "take", take, rig, seed=1)
     done = subprocess.run([sys.executable, "-m", "facedyn.cli", "import", str(tmp_path / "take" / "tracked.usdc"), "-o",
                            str(tmp_path / "imported" / "capture.usdc"), "-q"], capture_output=True, text=True)
