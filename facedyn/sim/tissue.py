@@ -55,8 +55,9 @@ stiffness left explicit would break the explicit part's stability bound (h^2 k a
 EXPLICIT_LIMIT: a Live Link curve that never quite holds still kept a correction below the
 tolerance for seconds, and it grew to metres on springs stiff along the normal). A still skull
 gives a zero right-hand side, hence exactly zero offsets. Those explicit parts can feed a
-stiff mode that Gauss-Legendre does not damp; a take whose offsets leave the face's size
-is stopped at that frame and integrated again at twice the steps per frame
+stiff mode that Gauss-Legendre does not damp; a take whose offsets leave what tissue does
+(MAX_DEFLECTION_CM, or the face's size) is stopped at that frame and integrated again at
+twice the steps per frame
 (`substep_ladder`), so a divergence costs time, not the take.
 """
 from __future__ import annotations
@@ -117,7 +118,8 @@ class SimulationDiverged(FacedynError):
 
 
 class _Diverged(Exception):
-    """The integration left the face at `frame` (u beyond the face's size, or not a number): retried with smaller steps."""
+    """The integration left the tissue at `frame` (u beyond MAX_DEFLECTION_CM or the face's size, or not a number):
+    retried with smaller steps."""
 
     def __init__(self, frame: int):
         super().__init__(frame)
@@ -132,6 +134,12 @@ class _Diverged(Exception):
 # without bound. 1 keeps the built-in face's dialog takes at their factorization count
 # (163 on apfel under walking) or a few more (33 -> 43 on alex_rom_4 standing still).
 EXPLICIT_LIMIT = 1.0
+# No vertex of a face's tissue moves this far from its bone: soft tissue lies 0.3-3 cm deep
+# (TissueParams.random), and the standard protocol's 72 dialog takes on a 2.7k-point ARKit
+# test rig peak at 3.1 cm (running, hopping). A vertex beyond it is a numerical spike: a
+# stiff mode that Gauss-Legendre does not damp, excited by the expression's inertia (one
+# vertex of apfel under walking rang to 13.8 cm at one step per frame, 0.9 cm at two).
+MAX_DEFLECTION_CM = 5.0
 MAX_SUBSTEPS = 16  # the finest step a diverging take is retried at, per frame (1/1920 s at 120 fps)
 
 
@@ -334,7 +342,7 @@ def simulate(
     if frames > 1 and free.size:
         skull = SkullMotion(translate, orient, fps, params.gravity_cm_s2)
         turned = skull.gravity_change(orient)
-        limit = float(np.ptp(neutral, axis=0).max())  # a deflection beyond the face's own size is no tissue
+        limit = min(MAX_DEFLECTION_CM, float(np.ptp(neutral, axis=0).max()))  # beyond it (or the face's size): no tissue
         with single_threaded_blas():
             for substeps in substep_ladder(params.substeps, max_substeps):
                 tissue = _Tissue(neutral, tri, free, hz[free], params, 1.0 / (fps * substeps))

@@ -600,3 +600,17 @@ def test_a_diverging_integration_is_retried_at_finer_steps(patch, monkeypatch):
     with pytest.raises(SimulationDiverged, match=r"diverged at frame \d+ \(.* s\) even at 2 steps per frame"):
         simulate(y, tris, translate, orient, FPS, replace(params, substeps=2), rigid_weights=weights, neutral=points,
                  max_substeps=2)
+
+
+def test_a_vertex_beyond_what_tissue_does_is_a_divergence(patch, monkeypatch):
+    """Offsets are bounded by MAX_DEFLECTION_CM (and the face's size): a take that exceeds it
+    at every step size is an error naming the frame, not a take with a spike in it."""
+    from facedyn.sim import tissue
+
+    points, tris, weights = patch
+    frames = 60
+    translate, orient = sinusoid(frames, 8.0, 0.3)
+    result = simulate(held(points, frames), tris, translate, orient, FPS, rigid_weights=weights, neutral=points)
+    monkeypatch.setattr(tissue, "MAX_DEFLECTION_CM", 0.5 * float(np.abs(result.offsets).max()))
+    with pytest.raises(SimulationDiverged, match=r"diverged at frame \d+ .* even at 4 steps per frame"):
+        simulate(held(points, frames), tris, translate, orient, FPS, rigid_weights=weights, neutral=points, max_substeps=4)
