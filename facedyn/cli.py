@@ -132,8 +132,10 @@ def _cmd_env(args) -> int:
 
 
 def _cmd_inspect(args) -> int:
+    from facedyn.io.files import check_not_special
     from facedyn.usd.inspect import describe_take, format_description
 
+    check_not_special(args.path)
     if args.path.is_file() and not args.path.suffix.lower().startswith(".usd"):
         from facedyn.dynamics.modelfile import describe_model
 
@@ -147,9 +149,11 @@ def _cmd_inspect(args) -> int:
 
 def _cmd_layers(args) -> int:
     from facedyn.errors import UsageError
+    from facedyn.io.files import check_not_special
     from facedyn.usd import rootedit
     from facedyn.usd.stackstatus import format_layers, stack_status
 
+    check_not_special(args.take)
     if (args.above or args.below) and not args.move:
         raise UsageError("--above/--below go with --move LAYER")
     if args.move and bool(args.above) == bool(args.below):
@@ -168,8 +172,10 @@ def _cmd_layers(args) -> int:
 
 
 def _cmd_validate(args) -> int:
+    from facedyn.io.files import check_not_special
     from facedyn.usd.validate import validate_take
 
+    check_not_special(args.take)
     findings = validate_take(args.take)
     errors = [f for f in findings if f.severity == "error"]
     if args.json:

@@ -9,6 +9,7 @@ Missing folders of the output are created (and removed again if the run fails).
 """
 from __future__ import annotations
 
+import os
 import shutil
 import time
 from pathlib import Path
@@ -108,6 +109,7 @@ def _check_names(processor: Processor, request: Request) -> None:
     from facedyn.errors import FacedynError
 
     named = [*request.inputs, request.output] + ([request.attach] if request.attach is not None else [])
+    _check_not_special(processor, request)
     for path in named:
         try:
             path.resolve()
@@ -124,6 +126,26 @@ def _check_names(processor: Processor, request: Request) -> None:
             if path is not None and path.suffix.lower() not in LAYER_SUFFIXES:
                 raise UsageError(f"{flag} {path}: a layer is written as .usdc (data) or .usda (roots), not "
                                  f"{path.suffix or 'a name without extension'}")
+
+
+def _check_not_special(processor: Processor, request: Request) -> None:
+    """Every path on the command line (operands, -o, --attach, path-valued flags) names a file or folder, not a FIFO or device.
+
+    Checked on the path's status only, before any reader opens it: a FIFO would block the
+    reader forever and a device would feed it endlessly. A string flag (e.g. a skull motion
+    that is a BVH file or a motion's name) is checked when it names something that exists.
+    """
+    from facedyn.io.files import check_not_special
+
+    for path in request.inputs:
+        check_not_special(path)
+    check_not_special(request.output, "-o")
+    if request.attach is not None:
+        check_not_special(request.attach, "--attach")
+    for param in processor.parameters:
+        value = request.params.get(param.name)
+        if isinstance(value, (str, Path)) and str(value) and (param.type is Path or os.path.lexists(value)):
+            check_not_special(value, param.flag)
 
 
 def utf8_path(path: Path) -> bool:

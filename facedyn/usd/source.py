@@ -22,7 +22,7 @@ from facedyn.usd.skel import SkelBake, plan_skel_bake
 from facedyn.usd.stage import get_prim, layer_name, open_stage
 from facedyn.usd.take import (ensure_plausible_points, find_animated_meshes, read_topology, read_uvs, read_vec3_samples,
                               select_time_codes)
-from facedyn.usd.takechecks import CENTIMETRES
+from facedyn.usd.takechecks import CENTIMETRES, scale_problem
 from facedyn.usd.timing import Timing
 
 BLOCK_FRAMES = 128  # frames converted in float64 at a time
@@ -99,6 +99,10 @@ def open_mesh_source(path: Path, mesh: str = "", frames: tuple[float, float] | N
     static setup and the time codes is read here.
     """
     stage = open_stage(path)
+    timing = Timing.from_stage(stage)
+    problem = scale_problem(timing.meters_per_unit, timing.time_codes_per_second, timing.frames_per_second)
+    if problem:
+        raise TakeError(f"{layer_name(stage)}: {problem} (fix the source's layer metadata; facedyn will not guess it)")
     skel = plan_skel_bake(stage)
     if mesh:
         prim = get_prim(stage, mesh)
@@ -123,7 +127,7 @@ def open_mesh_source(path: Path, mesh: str = "", frames: tuple[float, float] | N
         time_codes = select_time_codes(stage, prim, frames, whole_frames, skinned)
     where = f"{layer_name(stage)}: {prim.GetPath()}"
     return MeshSource(stage, prim, time_codes, read_topology(geom, where), read_uvs(geom), schema.FaceAttributes.read(prim),
-                      Timing.from_stage(stage), skel if skel.roots else None)
+                      timing, skel if skel.roots else None)
 
 
 @dataclass

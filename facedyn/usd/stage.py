@@ -6,6 +6,7 @@ from pathlib import Path
 
 from pxr import Sdf, Tf, Usd
 
+from facedyn.io.files import special_file_kind
 from facedyn.usd.errors import TakeError
 
 
@@ -23,12 +24,53 @@ def open_stage(path: str | os.PathLike) -> Usd.Stage:
     if not Sdf.FileFormat.FindByExtension(path.suffix.lstrip(".")):
         raise TakeError(f"{path}: not a USD file (unknown extension {path.suffix!r})")
     try:
-        stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
+        layers = _open_layer_files(path)  # held open while the stage composes them, so each is read once
+        stage = Usd.Stage.Open(layers[0], Usd.Stage.LoadAll)
     except Tf.ErrorException:
         raise TakeError(f"{path}: not a readable USD file (the USD parser rejected it)") from None
     if stage is None:
         raise TakeError(f"{path}: not a readable USD file")
     return stage
+
+
+MAX_LAYER_FILES = 100_000  # layers of one stage's sublayers, references and payloads, walked before it opens
+
+
+def _open_layer_files(path: Path) -> list[Sdf.Layer]:
+    """The layer at `path` and every local layer file it composes (sublayers, references,
+    payloads, recursively), each checked to be a regular file before USD opens it.
+
+    USD opens what a layer names without asking: a sublayer that is a FIFO would block the
+    stage's opening forever, a device would never end. Opening the layers here, in the order
+    USD would, lets each asset be checked first; USD then finds them already open.
+    """
+    layers: list[Sdf.Layer] = []
+    seen: set[str] = set()
+    pending = [(str(path), None)]
+    while pending and len(layers) < MAX_LAYER_FILES:
+        file, named_by = pending.pop()
+        if file in seen:
+            continue
+        seen.add(file)
+        kind = special_file_kind(file)
+        if kind is not None:
+            where = f"{named_by}: names {file}, which" if named_by else file
+            raise TakeError(f"{where} is {kind}, not a USD file; facedyn opens only regular files")
+        if named_by is not None and not os.path.isfile(file):
+            continue  # missing or a folder: USD reports it as it composes
+        try:
+            layer = Sdf.Layer.FindOrOpen(file)
+        except Tf.ErrorException:
+            layer = None
+        if layer is None:
+            if named_by is None:
+                raise TakeError(f"{path}: not a readable USD file (the USD parser rejected it)")
+            raise TakeError(f"{named_by}: names {file}, which is not a readable USD file (damaged or truncated?)")
+        layers.append(layer)
+        for asset in layer.GetCompositionAssetDependencies():
+            if asset and not Sdf.Layer.IsAnonymousLayerIdentifier(asset):
+                pending.append((layer.ComputeAbsolutePath(asset), layer.realPath or layer.identifier))
+    return layers
 
 
 def get_prim(stage: Usd.Stage, prim_path: str) -> Usd.Prim:
