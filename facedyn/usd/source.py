@@ -22,7 +22,7 @@ from facedyn.usd.skel import SkelBake, plan_skel_bake
 from facedyn.usd.stage import get_prim, layer_name, open_stage
 from facedyn.usd.take import (ensure_plausible_points, find_animated_meshes, read_topology, read_uvs, read_vec3_samples,
                               select_time_codes)
-from facedyn.usd.takechecks import CENTIMETRES, scale_problem
+from facedyn.usd.takechecks import CENTIMETRES
 from facedyn.usd.timing import Timing
 
 BLOCK_FRAMES = 128  # frames converted in float64 at a time
@@ -98,11 +98,8 @@ def open_mesh_source(path: Path, mesh: str = "", frames: tuple[float, float] | N
     consecutive whole frames at the stage's rate (take.select_time_codes). Nothing but the
     static setup and the time codes is read here.
     """
-    stage = open_stage(path)
+    stage = open_stage(path)  # refuses layers whose units or rates are not finite and positive
     timing = Timing.from_stage(stage)
-    problem = scale_problem(timing.meters_per_unit, timing.time_codes_per_second, timing.frames_per_second)
-    if problem:
-        raise TakeError(f"{layer_name(stage)}: {problem} (fix the source's layer metadata; facedyn will not guess it)")
     skel = plan_skel_bake(stage)
     if mesh:
         prim = get_prim(stage, mesh)

@@ -4,10 +4,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from pxr import Sdf, Tf, Usd
+from pxr import Sdf, Tf, Usd, UsdGeom
 
 from facedyn.io.files import special_file_kind
 from facedyn.usd.errors import TakeError
+from facedyn.usd.takechecks import CENTIMETRES, scale_problem
 
 
 def open_stage(path: str | os.PathLike) -> Usd.Stage:
@@ -66,11 +67,27 @@ def _open_layer_files(path: Path) -> list[Sdf.Layer]:
             if named_by is None:
                 raise TakeError(f"{path}: not a readable USD file (the USD parser rejected it)")
             raise TakeError(f"{named_by}: names {file}, which is not a readable USD file (damaged or truncated?)")
+        problem = _scale_problem(layer)
+        if problem:
+            raise TakeError(f"{layer.realPath or file}: {problem} (fix the layer's metadata; facedyn will not guess it)")
         layers.append(layer)
         for asset in layer.GetCompositionAssetDependencies():
             if asset and not Sdf.Layer.IsAnonymousLayerIdentifier(asset):
                 pending.append((layer.ComputeAbsolutePath(asset), layer.realPath or layer.identifier))
     return layers
+
+
+def _scale_problem(layer: Sdf.Layer) -> str | None:
+    """Why a layer's authored metersPerUnit or rates cannot be composed (takechecks.scale_problem), or None.
+
+    Checked before the stage composes: a rate of 0 maps every time sample of the layers
+    below onto one time code (USD scales their times by the ratio of rates).
+    """
+    info = layer.pseudoRoot
+    meters = info.GetInfo(UsdGeom.Tokens.metersPerUnit) if info.HasInfo(UsdGeom.Tokens.metersPerUnit) else CENTIMETRES
+    rates = (layer.timeCodesPerSecond if layer.HasTimeCodesPerSecond() else 24.0,
+             layer.framesPerSecond if layer.HasFramesPerSecond() else 24.0)
+    return scale_problem(float(meters), *map(float, rates))
 
 
 def get_prim(stage: Usd.Stage, prim_path: str) -> Usd.Prim:

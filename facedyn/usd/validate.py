@@ -22,7 +22,7 @@ from facedyn.usd.layerstack import is_take_root
 from facedyn.usd.stackstatus import open_root, stack_status
 from facedyn.usd.stage import layer_name, open_stage, resolve_asset_path
 from facedyn.usd.take import find_face_mesh, read_skull_transforms
-from facedyn.usd.takechecks import frame_grid_problem, scale_problem, units_problem
+from facedyn.usd.takechecks import frame_grid_problem, units_problem
 
 # Validators about packaging that do not apply to plain layer files.
 _SKIPPED_USD_VALIDATORS = {"usdUtilsValidators:UsdzPackageValidator", "usdUtilsValidators:PackageEncapsulationValidator"}
@@ -114,11 +114,7 @@ def timing_findings(stage: Usd.Stage) -> list[Finding]:
     root = stage.GetRootLayer()
     expected = (stage.GetTimeCodesPerSecond(), stage.GetFramesPerSecond())
     findings = []
-    meters_per_unit = UsdGeom.GetStageMetersPerUnit(stage)
-    rates = scale_problem(1.0, *expected)
-    if rates:
-        findings.append(Finding("error", "facedyn:Timing", rates, layer_name(stage)))
-    problem = scale_problem(meters_per_unit, 1.0, 1.0) or units_problem(meters_per_unit, str(UsdGeom.GetStageUpAxis(stage)))
+    problem = units_problem(UsdGeom.GetStageMetersPerUnit(stage), str(UsdGeom.GetStageUpAxis(stage)))
     if problem:
         findings.append(Finding("error", "facedyn:Units", problem, layer_name(stage)))
     for layer in stage.GetLayerStack(includeSessionLayers=False):
