@@ -245,3 +245,13 @@ def test_failed_batch_takes_leave_no_folders(tmp_path):
     result = execute_step(plans[0], None)
     assert result["status"] == "failed" and "gone.usdc" in result["error"]
     assert not (tmp_path / "batch" / "gone").exists()
+
+
+def test_a_source_without_an_extension_is_named(tmp_path, grid_cache, capsys):
+    """USD's format registry raised on an empty extension (as on /dev/null)."""
+    cache, _ = grid_cache
+    bare = tmp_path / "capture"
+    bare.write_bytes(Path(cache).read_bytes())
+    code, _, err = run(["import", bare, "-o", tmp_path / "o" / "c.usdc"], capsys)
+    one_line(code, err, 1, f"{bare}: not a USD file (unknown extension '')")
+    assert not (tmp_path / "o").exists()

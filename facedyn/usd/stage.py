@@ -22,7 +22,10 @@ def open_stage(path: str | os.PathLike) -> Usd.Stage:
         raise TakeError(f"{path}: no such file")
     if path.is_dir():
         raise TakeError(f"{path}: is a folder, expected a USD file")
-    if not Sdf.FileFormat.FindByExtension(path.suffix.lstrip(".")):
+    kind = special_file_kind(path)
+    if kind is not None:
+        raise TakeError(f"{path}: is {kind}, not a USD file; facedyn opens only regular files")
+    if not path.suffix.lstrip(".") or not Sdf.FileFormat.FindByExtension(path.suffix.lstrip(".")):
         raise TakeError(f"{path}: not a USD file (unknown extension {path.suffix!r})")
     try:
         layers = _open_layer_files(path)  # held open while the stage composes them, so each is read once
