@@ -132,8 +132,10 @@ def _cmd_env(args) -> int:
 
 
 def _cmd_inspect(args) -> int:
+    from facedyn.io.files import check_not_special
     from facedyn.usd.inspect import describe_take, format_description
 
+    check_not_special(args.path)
     if args.path.is_file() and not args.path.suffix.lower().startswith(".usd"):
         from facedyn.dynamics.modelfile import describe_model
 
@@ -147,9 +149,11 @@ def _cmd_inspect(args) -> int:
 
 def _cmd_layers(args) -> int:
     from facedyn.errors import UsageError
+    from facedyn.io.files import check_not_special
     from facedyn.usd import rootedit
     from facedyn.usd.stackstatus import check_take_root, format_layers, lists_itself, stack_status
 
+    check_not_special(args.take)
     check_take_root(args.take)
     itself = lists_itself(args.take)
     detaching_itself = args.detach is not None and args.take.resolve() in (Path(args.detach).resolve(), (args.take.parent / args.detach).resolve())
@@ -174,8 +178,10 @@ def _cmd_layers(args) -> int:
 
 
 def _cmd_validate(args) -> int:
+    from facedyn.io.files import check_not_special
     from facedyn.usd.validate import validate_take
 
+    check_not_special(args.take)
     findings = validate_take(args.take)
     errors = [f for f in findings if f.severity == "error"]
     if args.json:

@@ -54,11 +54,20 @@ def run_batch(args) -> int:
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be at least 1, got {args.workers}")
     takes = plan_batch(args.captures, args.output, parse_steps(args.steps), models_from(args))
-    Path(args.output).mkdir(parents=True, exist_ok=True)
+    output = Path(args.output)
+    if output.exists() and not output.is_dir():
+        raise UsageError(f"-o {output}: is a file; -o names the folder of the takes")
+    made = [p for p in [output, *output.parents] if not p.exists()]  # innermost first
+    output.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
-    with open_client(args.workers, args.scheduler) as client:
-        workers = len(client.scheduler_info()["workers"])
-        results = run_steps(client, takes, args.force, None if args.json else progress_printer(takes, sys.stderr))
+    try:
+        with open_client(args.workers, args.scheduler) as client:
+            workers = len(client.scheduler_info()["workers"])
+            results = run_steps(client, takes, args.force, None if args.json else progress_printer(takes, sys.stderr))
+    finally:
+        for folder in made:  # every take failed before writing anything: no empty OUTDIR left behind
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
     report = batch_report(takes, results, time.perf_counter() - started, workers)
     if args.json:
         print(json.dumps(report, indent=2))

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from facedyn.errors import UsageError
+from facedyn.io.errors import InputError
+from facedyn.io.files import check_not_special, read_lines
 
 STEPS = ("import", "stabilize", "remove", "synthesize", "preview")
 SHOT_LIST_SUFFIXES = (".txt", ".list")
@@ -61,14 +63,16 @@ def find_captures(items: list[str]) -> list[Path]:
         elif Path(item).suffix in SHOT_LIST_SUFFIXES:
             listing = Path(item)
             try:
-                lines = listing.read_text().splitlines()
-            except OSError as exc:
-                raise UsageError(f"{item}: cannot read the shot list ({exc.strerror})") from None
+                lines = read_lines(listing)
+            except InputError as exc:
+                raise UsageError(f"cannot read the shot list {exc}") from None
             captures += [listing.parent / line.strip() for line in lines if line.strip() and not line.lstrip().startswith("#")]
         else:
             captures.append(Path(item))
     if not captures:
         raise UsageError("no capture to process")
+    for capture in captures:
+        check_not_special(capture)
     return [c.absolute() for c in captures]
 
 
@@ -123,6 +127,10 @@ def motion_label(skull_motion: str | None) -> str:
 
 def plan_batch(captures: list[str], output: Path, steps: tuple[str, ...], models: Models) -> list[list[StepPlan]]:
     """Every take's steps; the models the steps need must be given."""
+    for flag, path in (("--model", models.removal), ("--synthesis-model", models.synthesis), ("--actor", models.actor),
+                       ("--skull-motion", models.skull_motion)):
+        if path is not None:
+            check_not_special(path, flag)
     if "remove" in steps and models.removal is None:
         raise UsageError("the remove step needs a removal model (--model)")
     if "synthesize" in steps and models.synthesis is None:

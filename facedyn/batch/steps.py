@@ -51,9 +51,11 @@ def execute_step(plan: StepPlan, previous: dict | None, force: bool = False) -> 
     result["key"] = step_key(plan, checksums, previous["key"] if previous else None)
     if not force and is_current(plan, result["key"]):
         return finish("skipped")
-    plan.folder.mkdir(parents=True, exist_ok=True)
-    code, error = run_cli(plan.argv)
+    made = not plan.folder.exists()
+    code, error = run_cli(plan.argv)  # the step's command makes the take folder it writes into
     if code != 0:
+        if made and plan.folder.is_dir() and not any(plan.folder.iterdir()):
+            plan.folder.rmdir()  # a take that failed at its first step leaves no folder behind
         return finish("failed", error)
     record_step(plan, result["key"], checksums, time.perf_counter() - started)
     return finish("ok")

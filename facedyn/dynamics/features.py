@@ -96,12 +96,15 @@ def windows(velocities: np.ndarray, window: int) -> np.ndarray:
     return span_windows(velocities, window, window)
 
 
-def span_windows(values: np.ndarray, past: int, future: int) -> np.ndarray:
-    """(F, ..., 3) per-frame vectors -> (F, ..., (past+future+1)*3) windows t-past..t+future, zero outside."""
-    f = len(values)
+def span_windows(values: np.ndarray, past: int, future: int, rows: tuple[int, int] | None = None) -> np.ndarray:
+    """(F, ..., 3) per-frame vectors -> (F, ..., (past+future+1)*3) windows t-past..t+future, zero outside.
+
+    rows (a, z): the windows of frames a..z-1 only.
+    """
+    a, z = (0, len(values)) if rows is None else rows
     padded = np.pad(values, [(past, future)] + [(0, 0)] * (values.ndim - 1))
     width = past + future + 1
-    idx = np.arange(f)[:, None] + np.arange(width)[None, :]  # (F, width) into padded
+    idx = np.arange(a, z)[:, None] + np.arange(width)[None, :]  # (z - a, width) into padded
     win = np.moveaxis(padded[idx], 1, -2)  # (F, ..., width, 3)
     return win.reshape(win.shape[:-2] + (width * 3,))
 

@@ -65,6 +65,10 @@ MAX_DIMENSIONS = 4
 MAX_HIDDEN_LAYERS = 16
 MAX_LAYER_WIDTH = 1 << 16
 MAX_WINDOW = 10000
+CHUNK_BYTES = 512 << 20  # what one chunk of frames may allocate when a model is applied (affordable_frames)
+FRAME_BYTES_FLOOR = 64 << 20  # what applying any model may allocate for one frame (see _check_sizes)
+_SAMPLE_POSITIONS = "sample_positions"  # F's per-sample rest positions (facedyn.dynamics.removal.SAMPLE_POSITIONS)
+_STRETCH_SAMPLES = "stretch/samples"  # H's stretch neighbourhoods' samples (facedyn.dynamics.synthesis)
 _DTYPES = {"float32": np.float32, "float64": np.float64, "int32": np.int32, "int64": np.int64}
 _RESERVED = ("format", "version", "kind", "fps", "windows", "architecture", "topology_fingerprint", "point_count", "skull_landmarks", "skin_samples", "normalization", "skull_motion")
 
@@ -328,6 +332,9 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
             raise ModelFileError(f"{path}: windows {str(windows)[:100]} are not whole numbers of frames from 0 to {MAX_WINDOW}")
         if "skull_motion" not in metadata and "skull" not in windows:
             raise ModelFileError(f"{path}: records neither its skull_motion input nor a skull window")
+        if kind == "removal" and "skull" not in windows:
+            raise ModelFileError(f"{path}: a removal model needs windows.skull, the frames its skin features span")
+        _check_skull_motion(path, metadata.get("skull_motion"))
         network = Network(spec)
         network.load_state_dict({k[len("network/"):]: torch.from_numpy(v) for k, v in arrays.items() if k.startswith("network/")})
         face = FaceSetup(
@@ -351,6 +358,7 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
         if isinstance(exc, FacedynError):
             raise
         raise ModelFileError(f"{path} is an incomplete or inconsistent model: {type(exc).__name__}: {str(exc)[:200]}") from None
+    _check_sizes(path, model, stored.size)
     recorded = metadata.get("topology_fingerprint")
     if model.fingerprint != recorded:
         raise ModelFileError(f"{path}: its stored topology hashes to {model.fingerprint}, not the recorded {str(recorded)[:40]}")
@@ -358,6 +366,102 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
         model.warnings.append(f"{path} is model format version {metadata['version']}, written without checksums, so damage to it cannot be detected; re-save it (load and save it with this facedyn) to add them")
     network.eval()
     return model
+
+
+def _check_skull_motion(path: Path, value) -> None:
+    """A recorded skull_motion input, bounded like the windows, before its width is used."""
+    if value is None:
+        return
+    if not (isinstance(value, dict) and all(_whole(value.get(k)) and 0 <= value[k] <= MAX_WINDOW for k in ("past", "future"))):
+        raise ModelFileError(f"{path}: skull_motion {str(value)[:100]} needs past and future in whole frames from 0 to {MAX_WINDOW}")
+
+
+def feature_sizes(model: DynamicsModel) -> dict[str, int]:
+    """The network's input and output widths its metadata implies, derived as removal and synthesis build them.
+
+    removal (F, one evaluation per skin sample): the skull features (landmarks x skull
+    window frames x 3) plus the skin features (windows.skull as t-w..t+w, x 3) plus the
+    sample's rest position when it reads one; 3 outputs. synthesis (H, one evaluation per
+    frame): the skull features plus 2 stretch values per sample; 3 outputs per sample.
+    """
+    skull = len(model.face.landmarks) * model.skull_input.width * 3
+    samples = len(model.face.samples)
+    if model.kind == "removal":
+        skin = (2 * model.windows["skull"] + 1) * 3 + (3 if _SAMPLE_POSITIONS in model.arrays else 0)
+        return {"skull": skull, "skin": skin, "inputs": skull + skin, "outputs": 3, "items": samples}
+    return {"skull": skull, "stretch": 2 * samples, "inputs": skull + 2 * samples, "outputs": 3 * samples, "items": 1}
+
+
+def frame_bytes(model: DynamicsModel) -> dict[str, int]:
+    """What applying the model allocates per frame of a take (bytes), and per frame of window context.
+
+    per_frame: the network's inputs, hidden activations and outputs for every evaluation of
+    a frame, plus the mesh-sized arrays a frame's result is propagated into (offsets,
+    result points, the skull-space copy; float32). context: what each frame a window reaches
+    beyond a chunk costs (the removal features are computed over a chunk's whole reach).
+    """
+    sizes = feature_sizes(model)
+    spec = model.network.spec
+    evaluations = sizes["items"] * (sizes["inputs"] + sum(spec.hidden) + spec.outputs)
+    mesh = 3 * model.face.point_count * 3
+    skull_windows = len(model.face.landmarks) * (2 * model.windows.get("skull", 0) + 1) * 3
+    features = sizes["items"] * sizes["inputs"] + skull_windows if model.kind == "removal" else sizes["inputs"]
+    per_frame = 4 * (evaluations + mesh + features)
+    reach = 2 * model.windows.get("skull", 0) + 1 if model.kind == "removal" else 0
+    return {"per_frame": per_frame, "context_frames": reach, "context": 4 * features}
+
+
+def affordable_frames(model: DynamicsModel, chunk_frames: int) -> int:
+    """chunk_frames, or fewer when a chunk of them would allocate more than CHUNK_BYTES (at least 1).
+
+    A trained F needs about 2 MiB a frame, so its chunks keep their size; a model whose
+    windows or widths are larger is applied a few frames at a time instead.
+    """
+    cost = frame_bytes(model)
+    budget = CHUNK_BYTES - cost["context_frames"] * cost["context"]
+    return max(1, min(int(chunk_frames), budget // cost["per_frame"]))
+
+
+def _check_sizes(path: Path, model: DynamicsModel, file_bytes: int) -> None:
+    """Every size the metadata implies matches the stored arrays, and one frame's work is bounded, before anything is applied.
+
+    The bound: applying the model to one frame (with the window frames it reaches) may
+    allocate at most 4 times the file's size, or FRAME_BYTES_FLOOR for small models (a
+    trained F on a 11,000-point mesh needs about 2 MiB a frame).
+    """
+    if model.kind not in ("removal", "synthesis"):
+        return
+    spec, sizes = model.network.spec, feature_sizes(model)
+    if model.kind == "removal":
+        positions = model.arrays.get(_SAMPLE_POSITIONS)
+        if positions is not None and positions.shape != (len(model.face.samples), 3):
+            raise ModelFileError(f"{path}: its {_SAMPLE_POSITIONS} are {positions.shape}, not one 3-vector per skin sample "
+                                 f"({len(model.face.samples)})")
+        implied = (f"windows.skull {model.windows['skull']} (skin features of {sizes['skin']}) and "
+                   f"{_skull_source(model)} ({sizes['skull']} skull features)")
+    else:
+        stretch = model.arrays.get(_STRETCH_SAMPLES)
+        if stretch is not None and stretch.shape != (len(model.face.samples),):
+            raise ModelFileError(f"{path}: its {_STRETCH_SAMPLES} array is {stretch.shape}, "
+                                 f"not one entry per skin sample ({len(model.face.samples)})")
+        implied = f"{_skull_source(model)} ({sizes['skull']} skull features) and {len(model.face.samples)} skin samples"
+    if spec.inputs != sizes["inputs"]:
+        raise ModelFileError(f"{path}: {implied} make {sizes['inputs']} network inputs, but its architecture has {spec.inputs}")
+    if spec.outputs != sizes["outputs"]:
+        raise ModelFileError(f"{path}: {len(model.face.samples)} skin samples make {sizes['outputs']} network outputs, "
+                             f"but its architecture has {spec.outputs}")
+    cost = frame_bytes(model)
+    one_frame = cost["per_frame"] + cost["context_frames"] * cost["context"]
+    limit = max(FRAME_BYTES_FLOOR, 4 * file_bytes)
+    if one_frame > limit:
+        raise ModelFileError(f"{path}: applying it would allocate {one_frame / 2**20:,.1f} MiB for a single frame "
+                             f"({implied}), more than 4 times its {file_bytes / 2**20:,.1f} MiB file (or {FRAME_BYTES_FLOOR >> 20} MiB)")
+
+
+def _skull_source(model: DynamicsModel) -> str:
+    motion = model.skull_input
+    where = "skull_motion" if model.skull_motion is not None else "windows.skull"
+    return f"{where} {motion.kind} over {motion.width} frames x {len(model.face.landmarks)} landmarks"
 
 
 def _architecture(path: Path, architecture, arrays: dict[str, np.ndarray]) -> NetworkSpec:
@@ -429,6 +533,7 @@ def describe_model(path) -> dict:
         "rigid_vertices": int(len(model.face.rigid_vertices)),
         "architecture": model.network.spec.to_json(),
         "parameters": int(sum(p.numel() for p in model.network.parameters())),
+        "bytes_per_frame": frame_bytes(model)["per_frame"] if model.kind in ("removal", "synthesis") else None,
         "training": model.info.get("training"),
         "validation": model.info.get("validation"),
         "checksum": stored.checksums,

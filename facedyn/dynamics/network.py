@@ -19,6 +19,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from facedyn.errors import FacedynError
+
 REMOVAL_HIDDEN = (128, 128)
 SYNTHESIS_HIDDEN = (256, 256)
 
@@ -50,10 +52,25 @@ class NetworkSpec:
 
 
 def resolve_device(device: str) -> torch.device:
-    """``'auto'`` = the GPU when torch sees one, else the CPU; anything else as torch reads it."""
+    """``'auto'`` = the GPU when torch sees one, else the CPU; anything else as torch reads it
+    (a CUDA device this torch cannot use is a FacedynError, not torch's assertion)."""
     if device == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    problem = cuda_problem(device) if str(device).startswith("cuda") else None
+    if problem:
+        raise FacedynError(f"--device {device}: {problem}")
     return torch.device(device)
+
+
+def cuda_problem(device: str) -> str | None:
+    """Why this torch cannot run on the CUDA device `device` ('cuda' or 'cuda:N'), or None."""
+    if not torch.cuda.is_available():
+        built = "built without CUDA" if torch.version.cuda is None else f"built for CUDA {torch.version.cuda}, but it sees no GPU"
+        return f"CUDA is not available in this torch ({torch.__version__}, {built}); use --device cpu or auto"
+    index = torch.device(device).index
+    if index is not None and index >= torch.cuda.device_count():
+        return f"this machine has {torch.cuda.device_count()} CUDA device(s), numbered from 0; there is no {device}"
+    return None
 
 
 def removal_spec(skull_features: int = 315, skin_features: int = 63) -> NetworkSpec:

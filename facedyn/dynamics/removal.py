@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from facedyn.dynamics.features import check_fps, compute_features
-from facedyn.dynamics.modelfile import DynamicsModel
+from facedyn.dynamics.modelfile import DynamicsModel, affordable_frames
 from facedyn.dynamics.network import resolve_device
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.spikes import replace_spikes
@@ -92,9 +92,10 @@ def remove_dynamics(
     # facedyn's skull input (model.skull_motion) replaces the kernel's B(t): a few numbers per frame
     skull = None if model.skull_motion is None else model.skull_motion.features(t, q, model.face.landmarks, fps)
     offsets = np.empty((f, n, 3), np.float32)
+    step = affordable_frames(model, int(chunk_frames))
     with torch.inference_mode():
-        for a in range(0, f, int(chunk_frames)):
-            b = min(f, a + int(chunk_frames))
+        for a in range(0, f, step):
+            b = min(f, a + step)
             feats = compute_features(sample_points, t, q, model.face.landmarks, fps, space="skull", window=window, frame_range=(a, b), backend=backend)
             b_t = feats.skull if skull is None else skull[a:b]
             skin = skin_inputs(feats.skin, positions)

@@ -59,10 +59,14 @@ class SkullMotionInput:
         """Frames per window."""
         return self.past + self.future + 1
 
-    def features(self, translate, orient, landmarks, fps: float) -> np.ndarray:
-        """(F, L * width * 3) float32: landmark-major, then window entry, then x, y, z."""
+    def features(self, translate, orient, landmarks, fps: float, rows: tuple[int, int] | None = None) -> np.ndarray:
+        """(F, L * width * 3) float32: landmark-major, then window entry, then x, y, z.
+
+        rows (a, z): only the windows of frames a..z-1 (the same values), so a long take's
+        windows are built a chunk at a time.
+        """
         per_frame = (skull_accelerations if self.kind == "acceleration" else skull_velocities)(translate, orient, landmarks, fps)
-        w = span_windows(per_frame.astype(np.float32), self.past, self.future)
+        w = span_windows(per_frame.astype(np.float32), self.past, self.future, rows)
         return w.reshape(len(w), -1)
 
     def to_json(self) -> dict:

@@ -32,7 +32,7 @@ import torch
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.features import check_fps
-from facedyn.dynamics.modelfile import DynamicsModel
+from facedyn.dynamics.modelfile import DynamicsModel, affordable_frames
 from facedyn.dynamics.network import SYNTHESIS_HIDDEN, NetworkSpec, resolve_device
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.response import is_linear_response, synthesized_dynamics
@@ -207,9 +207,11 @@ def synthesize_dynamics(
     t, q = check_transforms(translate, orient, f)
     nb, lengths = model_stretch(model)
     y = np.ascontiguousarray(y, dtype=np.float32)
-    b = model.skull_input.features(t, q, model.face.landmarks, fps)
     # a linear response reads no stretch, and its stiffening and expression term read neighbouring frames
-    response = synthesized_dynamics(model, b, y[:, model.face.samples], fps, device) if is_linear_response(model) else None
+    response = None
+    if is_linear_response(model):
+        b = model.skull_input.features(t, q, model.face.landmarks, fps)
+        response = synthesized_dynamics(model, b, y[:, model.face.samples], fps, device)
     shape = expression_shape(y, model.windows.get("stretch_smoothing", 0)) if response is None else None
     propagator = model.propagator()
     network = model.network.to(resolve_device(device)).eval()
@@ -217,14 +219,16 @@ def synthesize_dynamics(
     samples = nb.sample_count
     offsets = np.empty((f, n, 3), np.float32)
     points = np.empty((f, n, 3), np.float32)
+    step = affordable_frames(model, int(chunk_frames))
     with torch.inference_mode():
-        for a in range(0, f, int(chunk_frames)):
-            z = min(f, a + int(chunk_frames))
+        for a in range(0, f, step):
+            z = min(f, a + step)
             if response is not None:
                 d = response[a:z]
             else:
                 s = stretch_features(shape[a:z], nb, lengths, backend)
-                inputs = np.concatenate([b[a:z], s.reshape(z - a, -1)], axis=1)
+                b = model.skull_input.features(t, q, model.face.landmarks, fps, rows=(a, z))  # this chunk's windows only
+                inputs = np.concatenate([b, s.reshape(z - a, -1)], axis=1)
                 d = network(torch.from_numpy(inputs).to(dev)).cpu().numpy().reshape(z - a, samples, 3)
             propagator.apply_into(np.ascontiguousarray(d), offsets[a:z])
             np.add(y[a:z], offsets[a:z], out=points[a:z])

@@ -46,6 +46,34 @@ def open_regular(path: str | PathLike) -> tuple[BinaryIO, int]:
     return os.fdopen(fd, "rb"), info.st_size
 
 
+def special_file_kind(path: str | PathLike) -> str | None:
+    """What a path names when it is neither a regular file nor a folder ("a FIFO", ...), else None.
+
+    Only the path's status is looked at (stat follows symbolic links, never opens), so this
+    is safe to ask before any reader opens the path: opening a FIFO blocks until a writer
+    comes, and a device may never end. A path that does not exist is None: its reader says so.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kinds = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+             (stat.S_ISSOCK, "a socket"))
+    return next((kind for test, kind in kinds if test(mode)), "not a regular file")
+
+
+def check_not_special(path: str | PathLike, flag: str = "") -> None:
+    """UsageError (naming `flag` when given) if `path` is a FIFO, device or socket; see special_file_kind."""
+    kind = special_file_kind(path)
+    if kind is not None:
+        from facedyn.errors import UsageError
+
+        where = f"{flag} {path}" if flag else str(path)
+        raise UsageError(f"{where}: is {kind}, not a regular file; facedyn reads only files (and folders where one is expected)")
+
+
 def read_text(path: str | PathLike, max_bytes: int = MAX_TEXT_BYTES) -> str:
     """A text file's contents: UTF-8 (a byte-order mark is dropped), else Latin-1."""
     handle, size = open_regular(path)

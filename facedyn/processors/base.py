@@ -224,7 +224,11 @@ def single_input(request: Request, what: str = "TAKE") -> Path:
 
 
 def check_device(text: str) -> str | None:
-    """torch device names: auto, cpu, cuda or cuda:N."""
-    if text in ("auto", "cpu", "cuda") or (text.startswith("cuda:") and text[5:].isdigit()):
+    """torch device names: auto, cpu, cuda or cuda:N, a CUDA one only where this torch has that GPU."""
+    if text in ("auto", "cpu"):
         return None
+    if text == "cuda" or (text.startswith("cuda:") and text[5:].isdigit()):
+        from facedyn.dynamics.network import cuda_problem
+
+        return cuda_problem(text)
     return f"expected auto, cpu, cuda or cuda:N, got {text!r}"

@@ -53,6 +53,8 @@ def run_guarded(argv: list[str], build) -> int:
         return fail("usdfacedyn: interrupted", 130, as_json)
     except ArgparseError as exc:
         return fail(f"usdfacedyn: usage error: {exc}", EXIT_USAGE, as_json)
+    except BrokenPipeError:
+        return _reader_went_away()
     except Exception as exc:  # every failure ends as one line; --debug shows the traceback
         if debug:
             traceback.print_exc()
@@ -98,6 +100,21 @@ def signals_raise():
     finally:
         for number, handler in previous.items():
             signal.signal(number, handler)
+
+
+def _reader_went_away() -> int:
+    """stdout's reader closed the pipe (`usdfacedyn inspect MODEL | head -1`): stop quietly, as Unix tools do.
+
+    stdout is pointed at /dev/null so that flushing it at exit does not raise again; the
+    exit code is the shell's for a process ended by SIGPIPE.
+    """
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # stdout is no file descriptor (captured in a batch worker)
+        pass
+    return 128 + signal.SIGPIPE
 
 
 def fail(message: str, code: int, as_json: bool) -> int:

@@ -48,7 +48,8 @@ class ImportProcessor(Processor):
         Parameter("mesh", str, "", "prim path of the animated Mesh in a USD source (default: the only one)"),
         Parameter("fps", float, 0.0, "OBJ: the sequence's frame rate (required); USD: resample the capture to this rate "
                   "onto whole frames (needed when its samples have gaps or fall between frames)", minimum=0.0, maximum=10000.0),
-        Parameter("units", float, 1.0, "centimetres per unit of an OBJ sequence", above=0.0, maximum=1e6),
+        Parameter("units", float, None, "centimetres per unit of an OBJ sequence (default: 1); a USD source states its own "
+                  "metersPerUnit", above=0.0, maximum=1e6),
         Parameter("root", Path, None, "take root to create or extend (default: take.usda beside the output)", metavar="ROOT"),
         Parameter("actor", Path, None, "the actor asset (usdfacedyn actor) the take belongs to, recorded in the take root: "
                   "stabilize and the trainers then use it by default", metavar="ACTOR"),
@@ -67,6 +68,7 @@ class ImportProcessor(Processor):
             raise UsageError("import creates or extends its own take root; name it with --root, not --attach")
         source = _source(request)
         root = self.take_root(request)
+        _check_flags_apply(source, request.params)
         if source.kind == "usd":
             resample = request.params["fps"] > 0
             mesh = open_mesh_source(source.paths[0], request.params["mesh"], request.frames, whole_frames=not resample)
@@ -113,6 +115,15 @@ def _source(request: Request) -> _Source:
     if len(paths) == 1:
         return _Source("usd", paths)
     raise UsageError("import takes one USD file, or OBJ files (a folder, or a list such as face.*.obj)")
+
+
+def _check_flags_apply(source: _Source, params: dict) -> None:
+    """A flag this kind of source cannot honour is a usage error, not silently ignored."""
+    if source.kind == "usd" and params["units"] is not None:
+        raise UsageError(f"--units applies to OBJ sequences; {source.paths[0]} is USD, whose own metersPerUnit "
+                         "is what import converts from (fix that metadata instead)")
+    if source.kind == "obj" and params["mesh"]:
+        raise UsageError("--mesh picks a prim in a USD source; an OBJ sequence holds one mesh")
 
 
 def _require_fps(request: Request) -> float:
@@ -196,7 +207,7 @@ def _obj_capture(paths: list[Path], frames: np.ndarray, sequence, params: dict) 
     from facedyn.usd import schema
     from facedyn.usd.takechecks import frame_grid_problem
 
-    fps, units = params["fps"], params["units"]
+    fps, units = params["fps"], 1.0 if params["units"] is None else params["units"]
     resampler, filled = None, frames
     if frame_grid_problem(frames, fps) is not None:  # gaps in the frame numbers
         resampler = _resampler(frames / fps, fps, str(paths[0].parent))

@@ -27,6 +27,9 @@ def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head",
     """
     duration = frame_count / fps
     kind, _, arg = source.partition(":")
+    if bvh and (source in PROCEDURAL or kind == "platform" or Path(source).suffix.lower().startswith(".usd")):
+        flags = ", ".join(f"--bvh-{key}" for key in bvh)
+        raise UsageError(f"{flags}: BVH conventions, but the skull motion {source!r} is not a BVH file")
     if source in PROCEDURAL:
         trajectory = getattr(motion, source)(duration_s=duration, fps=fps, seed=seed)
         return _fit(trajectory, frame_count, source)

@@ -10,6 +10,7 @@ Missing folders of the output are created (and removed again if the run fails).
 """
 from __future__ import annotations
 
+import os
 import shutil
 import time
 from pathlib import Path
@@ -149,6 +150,7 @@ def _check_names(processor: Processor, request: Request) -> None:
     from facedyn.errors import FacedynError
 
     named = [*request.inputs, request.output] + ([request.attach] if request.attach is not None else [])
+    _check_not_special(processor, request)
     for path in named:
         try:
             path.resolve()
@@ -165,6 +167,26 @@ def _check_names(processor: Processor, request: Request) -> None:
             if path is not None and path.suffix.lower() not in LAYER_SUFFIXES:
                 raise UsageError(f"{flag} {path}: a layer is written as .usdc (data) or .usda (roots), not "
                                  f"{path.suffix or 'a name without extension'}")
+
+
+def _check_not_special(processor: Processor, request: Request) -> None:
+    """Every path on the command line (operands, -o, --attach, path-valued flags) names a file or folder, not a FIFO or device.
+
+    Checked on the path's status only, before any reader opens it: a FIFO would block the
+    reader forever and a device would feed it endlessly. A string flag (e.g. a skull motion
+    that is a BVH file or a motion's name) is checked when it names something that exists.
+    """
+    from facedyn.io.files import check_not_special
+
+    for path in request.inputs:
+        check_not_special(path)
+    check_not_special(request.output, "-o")
+    if request.attach is not None:
+        check_not_special(request.attach, "--attach")
+    for param in processor.parameters:
+        value = request.params.get(param.name)
+        if isinstance(value, (str, Path)) and str(value) and (param.type is Path or os.path.lexists(value)):
+            check_not_special(value, param.flag)
 
 
 def utf8_path(path: Path) -> bool:
@@ -211,8 +233,14 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
     if root.exists() and not covers_take(root, (first, last)):
         raise UsageError(f"--frames {first:g}:{last:g} covers only part of {root}'s frames; attached, the layer would hold its "
                          "last sample over the rest of the take. Process the whole take, or leave out --attach")
-    placed = attach_written_layer(root, request.output, processor.writes.role, write,
-                                  create_with=output.timing if output.define else None, actor=output.actor)
+    root_existed = root.exists()
+    try:
+        placed = attach_written_layer(root, request.output, processor.writes.role, write,
+                                      create_with=output.timing if output.define else None, actor=output.actor)
+    except BaseException:
+        if not root_existed:
+            _remove_created_root(root, request.output)
+        raise
     report.update(root=str(root), sublayers=placed.sublayers, stale=placed.stale)
     return report
 
@@ -247,6 +275,41 @@ def _with_files(inputs: list, files: list[Path]) -> list:
     paths = [Path(i.path if isinstance(i, LayerInput) else i) for i in inputs]
     named = {p.resolve() for p in paths if p.is_absolute()}
     return list(inputs) + [f for f in files if f not in named]
+
+
+def _remove_created_root(root: Path, layer: Path) -> None:
+    """After a failed run, the take root it created (if it lists nothing but this run's layer) and the root's lock file.
+
+    A root this run made and could not finish would be a broken take.usda, and its lock
+    file alone would keep the output's folder from being removed. The lock file
+    (facedyn.usd.rootedit.root_lock's `.NAME.lock`) goes only when no one holds it.
+    """
+    import fcntl
+
+    from pxr import Sdf, Tf
+
+    if root.is_file():
+        try:
+            listed = Sdf.Layer.OpenAsAnonymous(str(root), metadataOnly=True)
+        except Tf.ErrorException:
+            listed = None
+        others = [a for a in (listed.subLayerPaths if listed else []) if (root.parent / a).resolve() != layer.resolve()]
+        if others:
+            return
+        root.unlink()
+    lock = root.parent / f".{root.name}.lock"
+    try:
+        fd = os.open(lock, os.O_RDWR)
+    except OSError:
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        if not root.exists():
+            lock.unlink()
+    except OSError:
+        pass  # another run holds it: its root is its own
+    finally:
+        os.close(fd)
 
 
 def _plain(value: Any) -> Any:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from facedyn.errors import UsageError
 from facedyn.performance import BACKENDS
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device
 from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames, model_inputs, reader_with_model
@@ -50,6 +51,8 @@ class SynthesizeProcessor(Processor):
         if params["skull_motion"]:
             translate, orient, described = skull_motion(params["skull_motion"], reader.fps, reader.frame_count, params["joint"],
                                                         params["seed"], bvh=bvh_options(params))
+        elif bvh_options(params):
+            raise UsageError(f"{', '.join('--bvh-' + k for k in bvh_options(params))}: BVH conventions, but no BVH --skull-motion is given")
         else:
             (translate, orient), described = reader.skull(), "the take's own"
         description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "skull_motion": described}

@@ -14,14 +14,24 @@ import numpy as np
 
 
 def tracked_frames(world: np.ndarray, valid: np.ndarray | None = None) -> np.ndarray:
-    """(F,) bool: frames that are valid (if given), not all NaN, and not a repeat of the frame before."""
+    """(F,) bool: frames that are valid (if given), not all NaN, and not a repeat of the frame before.
+
+    A capture whose every frame repeats the first is still, not dropped: its frames are all
+    tracked (a solve of it gives a still skull), where otherwise one tracked frame would
+    leave the smoother nothing to fit.
+    """
     frames = len(world)
     tracked = np.ones(frames, dtype=bool) if valid is None else np.asarray(valid, dtype=bool).copy()
     if tracked.shape != (frames,):
         raise ValueError(f"valid must be ({frames},), one flag per frame, got {tracked.shape}")
+    given = tracked.copy()
+    repeats = np.zeros(frames, dtype=bool)
     for f in range(frames):
-        if np.isnan(world[f]).all() or (f > 0 and np.array_equal(world[f], world[f - 1])):
+        repeats[f] = f > 0 and np.array_equal(world[f], world[f - 1])
+        if np.isnan(world[f]).all() or repeats[f]:
             tracked[f] = False
+    if frames > 1 and repeats[1:].all() and not np.isnan(world[0]).all():
+        return given  # every frame is the first: a still capture (nothing moved), not a tracker holding one fit
     if not tracked.any():
         raise ValueError("every frame is dropped (marked invalid, all NaN, or a repeat): nothing to stabilize")
     return tracked

@@ -38,7 +38,7 @@ def stack_files(path: str | os.PathLike) -> list[StackFile]:
             continue
         seen.add(current)
         layer = None
-        if current.is_file() and Sdf.FileFormat.FindByExtension(current.suffix.lstrip(".")):
+        if current.is_file() and current.suffix.lstrip(".") and Sdf.FileFormat.FindByExtension(current.suffix.lstrip(".")):
             try:
                 layer = Sdf.Layer.OpenAsAnonymous(str(current), metadataOnly=True)
             except Exception:  # an unreadable input is reported by whoever reads it

@@ -98,7 +98,8 @@ def open_mesh_source(path: Path, mesh: str = "", frames: tuple[float, float] | N
     consecutive whole frames at the stage's rate (take.select_time_codes). Nothing but the
     static setup and the time codes is read here.
     """
-    stage = open_stage(path)
+    stage = open_stage(path)  # refuses layers whose units or rates are not finite and positive
+    timing = Timing.from_stage(stage)
     skel = plan_skel_bake(stage)
     if mesh:
         prim = get_prim(stage, mesh)
@@ -123,7 +124,7 @@ def open_mesh_source(path: Path, mesh: str = "", frames: tuple[float, float] | N
         time_codes = select_time_codes(stage, prim, frames, whole_frames, skinned)
     where = f"{layer_name(stage)}: {prim.GetPath()}"
     return MeshSource(stage, prim, time_codes, read_topology(geom, where), read_uvs(geom), schema.FaceAttributes.read(prim),
-                      Timing.from_stage(stage), skel if skel.roots else None)
+                      timing, skel if skel.roots else None)
 
 
 @dataclass

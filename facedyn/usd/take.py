@@ -21,7 +21,7 @@ from facedyn.usd.layers import frame_extents
 from facedyn.usd.layerstack import LEGACY_PROCESSOR_ROLES, is_take_root, layer_metadata, role_of
 from facedyn.usd.runs import IN_MEMORY, LAYER, LayerInput, content_id
 from facedyn.usd.stage import get_prim, layer_name, open_stage
-from facedyn.usd.takechecks import frame_grid_problem, missing_keys_problem, orient_problem, units_problem
+from facedyn.usd.takechecks import frame_grid_problem, missing_keys_problem, orient_problem, scale_problem, units_problem
 from facedyn.usd.timing import Timing
 
 
@@ -96,7 +96,8 @@ def read_stage(
     their root; `usdfacedyn import` converts a capture once instead.
     """
     timing = Timing.from_stage(stage)
-    problem = units_problem(timing.meters_per_unit, timing.up_axis)
+    problem = scale_problem(timing.meters_per_unit, timing.time_codes_per_second, timing.frames_per_second) \
+        or units_problem(timing.meters_per_unit, timing.up_axis)
     if problem:
         raise TakeError(f"{layer_name(stage)}: {problem}")
     mesh_prim = get_prim(stage, mesh) if mesh else find_face_mesh(stage)

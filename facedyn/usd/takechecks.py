@@ -46,6 +46,19 @@ def _resample_hint(rate: float) -> str:
     return f"resample the capture with `usdfacedyn import CAPTURE --fps {rate:g}`"
 
 
+def scale_problem(meters_per_unit: float, time_codes_per_second: float, frames_per_second: float) -> str | None:
+    """Why a stage's metersPerUnit or rates cannot be read at all (not finite and positive), or None.
+
+    These scale every point and every time code: metersPerUnit 0 would put every point at
+    the origin and -1 would mirror the face, a rate of 0 or below has no seconds per frame.
+    """
+    for name, value in (("metersPerUnit", meters_per_unit), ("timeCodesPerSecond", time_codes_per_second),
+                        ("framesPerSecond", frames_per_second)):
+        if not (math.isfinite(value) and value > 0):
+            return f"{name} is {value:g}; it must be a finite number above 0"
+    return None
+
+
 def units_problem(meters_per_unit: float, up_axis: str) -> str | None:
     """Why a stage's units or up axis are not facedyn's (centimetres, Y up), or None."""
     if not (math.isfinite(meters_per_unit) and math.isclose(meters_per_unit, CENTIMETRES, rel_tol=1e-6)):

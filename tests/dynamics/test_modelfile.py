@@ -63,7 +63,7 @@ def test_synthesis_networks_use_the_same_file(tmp_path):
 def test_files_without_a_skull_motion_record_read_as_the_papers_velocities(tmp_path):
     """Files written before facedyn recorded the skull input used B(t) over windows['skull']."""
     samples = 12
-    model = make_model("synthesis", NetworkSpec(315 + 2 * samples, SYNTHESIS_HIDDEN, 3 * samples), SkullMotionInput("velocity", 10, 10))
+    model = make_model("synthesis", NetworkSpec(5 * 15 * 3 + 2 * samples, SYNTHESIS_HIDDEN, 3 * samples), SkullMotionInput("velocity", 7, 7))
     blob = save_model(model, tmp_path / "new.fdyn").read_bytes()
     (length,) = struct.unpack("<Q", blob[8:16])
     header = json.loads(blob[16:16 + length])
@@ -220,10 +220,18 @@ def _set(*keys_and_value):
         (_set("arrays", "network/input_mean", "dtype", "object"), "dtypes allowed"),
         (lambda h: h["arrays"].update({f"extra/a{i}": {"dtype": "int32", "shape": [0], "offset": 0} for i in range(300)}),
          "declares 301 arrays|declares 3\\d\\d arrays"),
+        (_set("metadata", "windows", "skull", 10000), "windows.skull 10000 \\(skin features of 60003\\) and windows.skull velocity over "
+         "20001 frames x 5 landmarks \\(300015 skull features\\) make 360018 network inputs, but its architecture has 378"),
+        (_set("metadata", "skull_landmarks", [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 1.0], [2.0, 0.0, 1.0], [0.0, 2.0, 3.0]]), "x 6 landmarks \\(378 skull features\\) make 441 network inputs"),
+        (_set("metadata", "skull_motion", {"kind": "acceleration", "past": 10**12, "future": 10}), "skull_motion .* needs past and future"),
+        (_set("metadata", "skull_motion", {"kind": "acceleration", "past": 30, "future": 10}), "make 678 network inputs, but its architecture has 378"),
+        (lambda h: h["metadata"].update(skull_motion={"kind": "velocity", "past": 10, "future": 10}, windows={"target": 10}),
+         "a removal model needs windows.skull"),
     ],
     ids=["fps-nan", "fps-string", "fps-zero", "fps-huge", "fps-bool", "window-fraction", "kind", "100k-layers",
          "giant-width", "architecture-mismatch", "samples-fraction", "samples-huge", "landmark-huge-int", "landmark-nan", "point-count", "no-fingerprint", "version-bool",
-         "version-3", "fractional-offset", "gap", "huge-shape", "too-many-dims", "object-dtype", "too-many-arrays"],
+         "version-3", "fractional-offset", "gap", "huge-shape", "too-many-dims", "object-dtype", "too-many-arrays",
+         "window-10000", "landmarks-added", "skull-motion-huge", "skull-motion-inconsistent", "no-skull-window"],
 )
 def test_crafted_headers_are_refused_before_allocating(tmp_path, edit, message):
     blob = save_model(make_model(), tmp_path / "actor.fdyn").read_bytes()
@@ -232,6 +240,41 @@ def test_crafted_headers_are_refused_before_allocating(tmp_path, edit, message):
         load_model(path)
     assert str(error.value).startswith(str(path)) or str(path) in str(error.value)
     assert "\n" not in str(error.value)
+
+
+def test_a_model_whose_frames_cost_more_than_its_size_allows_is_refused(tmp_path, monkeypatch):
+    """Consistent sizes can still make one frame expensive (wide windows, many samples): bounded by the file's size."""
+    from facedyn.dynamics import modelfile
+
+    path = save_model(make_model(), tmp_path / "actor.fdyn")
+    per_frame = modelfile.frame_bytes(load_model(path))
+    assert per_frame["per_frame"] == 4 * (12 * (378 + 256 + 3) + 3 * 80 * 3 + 12 * 378 + 5 * 21 * 3)
+    assert per_frame["context_frames"] == 21 and per_frame["context"] == 4 * (12 * 378 + 5 * 21 * 3)
+    one_frame = per_frame["per_frame"] + 21 * per_frame["context"]
+    monkeypatch.setattr(modelfile, "FRAME_BYTES_FLOOR", 0)
+    size = path.stat().st_size
+    assert one_frame <= 4 * size  # a trained model's frame is cheap next to its file
+    small = craft(tmp_path / "small.fdyn", path.read_bytes())
+    monkeypatch.setattr(modelfile, "FRAME_BYTES_FLOOR", 0)
+    monkeypatch.setattr(modelfile, "_check_sizes", _bounded(modelfile._check_sizes, one_frame // 4 - 1))
+    with pytest.raises(ModelFileError, match=r"small.fdyn: applying it would allocate .* MiB for a single frame .* more than 4 times"):
+        load_model(small)
+
+
+def _bounded(check, file_bytes):
+    return lambda path, model, _size: check(path, model, file_bytes)
+
+
+def test_chunks_shrink_to_what_a_model_can_afford(monkeypatch):
+    from facedyn.dynamics import modelfile
+
+    model = make_model()
+    assert modelfile.affordable_frames(model, 128) == 128
+    cost = modelfile.frame_bytes(model)
+    monkeypatch.setattr(modelfile, "CHUNK_BYTES", 21 * cost["context"] + 5 * cost["per_frame"] + 1)
+    assert modelfile.affordable_frames(model, 128) == 5
+    monkeypatch.setattr(modelfile, "CHUNK_BYTES", 0)
+    assert modelfile.affordable_frames(model, 128) == 1
 
 
 def test_headers_that_are_not_model_headers(tmp_path):
@@ -297,6 +340,9 @@ def test_describe_model_says_what_inspect_shows(tmp_path):
         "skull_features": SkullMotionInput().to_json(), "samples": 12, "landmarks": len(model.face.landmarks),
         "rigid_vertices": 16, "architecture": {"inputs": 678, "hidden": [128, 128], "outputs": 3, "activation": "relu"},
         "parameters": 678 * 128 + 128 + 128 * 128 + 128 + 128 * 3 + 3,
+        # float32: 12 samples x (678 inputs + 256 hidden + 3 outputs), 3 mesh arrays of 80 points,
+        # the features (12 x 678) and the kernel's B(t) over t-10..t+10 for 5 landmarks
+        "bytes_per_frame": 4 * (12 * (678 + 256 + 3) + 3 * 80 * 3 + 12 * 678 + 5 * 21 * 3),
         "training": {"takes": [{"name": "walk", "frames": 300}]}, "validation": {"rms_cm": 0.01},
         "checksum": header["checksums"], "warnings": [], "bytes": path.stat().st_size,
     }

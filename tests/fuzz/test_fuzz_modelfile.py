@@ -38,7 +38,12 @@ def model_file(kind: str) -> bytes:
     topology = Topology(np.full(len(quads), 4, np.int32), np.array(quads, np.int32).ravel())
     face = FaceSetup.build(topology, points, rigid_vertices=np.arange(6), sample_count=6)
     torch.manual_seed(0)
-    network = Network(NetworkSpec(12, (8, 8), 3 if kind == "removal" else 18))
+    landmarks = len(face.landmarks)  # widths as the metadata implies them (modelfile.feature_sizes)
+    if kind == "removal":
+        spec = NetworkSpec(landmarks * 5 * 3 + 5 * 3, (8, 8), 3)  # B(t) and X_i(t) over t-2..t+2
+    else:
+        spec = NetworkSpec(landmarks * 4 * 3 + 2 * 6, (8, 8), 18)  # accelerations over t-2..t+1, stretch of 6 samples
+    network = Network(spec)
     windows = {"skull": 2, "skin": 2, "target": 2} if kind == "removal" else {"stretch_smoothing": 2}
     model = DynamicsModel(kind, network, face, 120.0, windows, {"training": {"takes": [{"name": "fuzz", "frames": 9}], "device": "cpu"}, "validation": None},
                           skull_motion=None if kind == "removal" else SkullMotionInput("acceleration", 2, 1))
@@ -115,3 +120,62 @@ def test_model_files_load_or_give_a_clear_error(data):
             only_files(Path(folder), {"actor.model", "resaved.model"})
         else:
             only_files(Path(folder), {"actor.model"})
+
+
+SIZE_FIELDS = ("windows.skull", "skull_motion", "skull_landmarks", "skin_samples", "architecture.inputs")
+
+
+@st.composite
+def crafted_sizes(draw, blob: bytes) -> bytes:
+    """A model whose metadata implies sizes (windows, skull-motion spans, landmarks, samples, widths) other than
+    its arrays hold, with valid checksums: integrity proves nothing about sanity."""
+    (length,) = struct.unpack("<Q", blob[8:16])
+    header, data = json.loads(blob[16:16 + length]), blob[16 + length:]
+    metadata = header["metadata"]
+    field = draw(st.sampled_from(SIZE_FIELDS))
+    event(f"crafted size: {field}")
+    if field == "windows.skull":
+        metadata["windows"]["skull"] = draw(st.sampled_from([0, 1, 3, 100, 10000, 10001]))
+    elif field == "skull_motion":
+        metadata["skull_motion"] = {"kind": draw(st.sampled_from(["velocity", "acceleration"])),
+                                    "past": draw(st.sampled_from([0, 1, 2, 30, 10000, 10**9])),
+                                    "future": draw(st.sampled_from([0, 1, 10, 10000, 10**9]))}
+    elif field == "skull_landmarks":
+        count = draw(st.integers(1, 12))
+        metadata["skull_landmarks"] = [[float(i), float(i * i % 5), float(i % 3)] for i in range(count)]
+    elif field == "skin_samples":
+        metadata["skin_samples"] = draw(st.lists(st.integers(6, 29), min_size=1, max_size=20, unique=True))
+    else:
+        metadata["architecture"]["inputs"] = draw(st.sampled_from([1, 11, 13, 63, 10**5]))
+    header["checksums"] = checksums(metadata, header["arrays"], [data])
+    text = json.dumps(header).encode()
+    return blob[:8] + struct.pack("<Q", len(text)) + text + data
+
+
+@given(st.data())
+def test_sizes_the_metadata_implies_match_the_arrays_before_anything_is_allocated(data):
+    """A crafted size loads only where every derived width matches the arrays and a frame's work is bounded;
+    what loads then runs on a take without allocating more than a chunk's budget."""
+    from facedyn.dynamics import modelfile
+    from facedyn.dynamics.removal import remove_dynamics
+    from facedyn.dynamics.synthesis import synthesize_dynamics
+
+    kind = data.draw(st.sampled_from(["removal", "synthesis"]))
+    raw = data.draw(crafted_sizes(model_file(kind)))
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "actor.model"
+        path.write_bytes(raw)
+        model = outcome([path], lambda: load_model(path))
+        if model is None:
+            return
+        sizes = modelfile.feature_sizes(model)
+        assert (sizes["inputs"], sizes["outputs"]) == (model.network.spec.inputs, model.network.spec.outputs)
+        cost = modelfile.frame_bytes(model)
+        assert cost["per_frame"] + cost["context_frames"] * cost["context"] <= max(modelfile.FRAME_BYTES_FLOOR, 4 * len(raw))
+        rest = model.face.rest_points.astype(np.float32)
+        frames = np.stack([rest + np.float32(0.01 * i) for i in range(8)])
+        apply = remove_dynamics if kind == "removal" else synthesize_dynamics
+        if kind == "synthesis" and not any(k.startswith("stretch/") for k in model.arrays):
+            return  # this small H holds no stretch neighbourhoods to apply
+        points, offsets = outcome([path], lambda: apply(frames, None, None, model.fps, model, backend="numpy", device="cpu"))
+        assert np.isfinite(offsets).all()

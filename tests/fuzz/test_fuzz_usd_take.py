@@ -88,12 +88,15 @@ def _mutate(draw, folder: Path) -> None:
         spec.default = Vt.IntArray(values[: draw(st.integers(0, len(values)))])
     elif category == "units":
         key = draw(st.sampled_from([UsdGeom.Tokens.metersPerUnit, UsdGeom.Tokens.upAxis]))
-        layer.pseudoRoot.SetInfo(key, draw(st.sampled_from([1.0, 0.1, 0.0, -1.0, float("nan")]))
+        layer.pseudoRoot.SetInfo(key, draw(st.sampled_from([1.0, 0.1, 0.0, -1.0, -0.01, float("nan"), float("inf")]))
                                  if key == UsdGeom.Tokens.metersPerUnit else draw(st.sampled_from(["Z", "X"])))
     elif category == "rates":
-        rate = draw(st.sampled_from([30.0, 24.0, 1.0, 119.0, 1e6]))
-        layer.timeCodesPerSecond = rate
-        layer.framesPerSecond = rate
+        rate = draw(st.sampled_from([30.0, 24.0, 1.0, 119.0, 1e6, 0.0, -24.0, -120.0, float("nan"), float("inf")]))
+        which = draw(st.sampled_from(["both", "timeCodesPerSecond", "framesPerSecond"]))
+        if which in ("both", "timeCodesPerSecond"):
+            layer.timeCodesPerSecond = rate
+        if which in ("both", "framesPerSecond"):
+            layer.framesPerSecond = rate
     elif category == "between frames":
         value = layer.QueryTimeSample(points, frame)
         layer.EraseTimeSample(points, frame)
@@ -116,6 +119,7 @@ def _check_sound(perf) -> None:
     assert np.isfinite(perf.points).all() and perf.points.shape[1] > 0
     assert np.array_equal(perf.frames, np.round(perf.frames)) and (np.diff(perf.frames) == 1).all()
     assert perf.meters_per_unit == 0.01 and perf.up_axis == "Y"
+    assert np.isfinite(perf.fps) and perf.fps > 0
     assert perf.topology.face_vertex_indices.max() < perf.point_count
     if perf.skull_orient is not None:
         assert np.allclose(np.linalg.norm(perf.skull_orient, axis=1), 1.0, atol=1e-3)
@@ -138,3 +142,30 @@ def test_every_processor_read_gives_a_sound_take_or_a_clear_error(valid_take, da
             found = Sdf.Layer.Find(str(layer))
             if found is not None:
                 found.Reload(force=True)
+
+
+SCALE_VALUES = [0.0, -0.0, -1.0, -24.0, 1e-300, float("nan"), float("inf"), -float("inf"), 0.01, 1.0, 24.0, 120.0]
+
+
+@given(st.sampled_from(["metersPerUnit", "timeCodesPerSecond", "framesPerSecond"]), st.sampled_from(SCALE_VALUES))
+def test_an_import_source_with_non_positive_or_non_finite_units_or_rates_is_refused(valid_take, field, value):
+    """A source's metersPerUnit scales every point (0 collapses them, -1 mirrors them) and its rates every frame:
+    import reads one only where they are finite and above 0, and its points are then finite."""
+    from facedyn.usd.source import open_mesh_source
+
+    event(f"{field}: {'fine' if np.isfinite(value) and value > 0 else 'refused'}")
+    with tempfile.TemporaryDirectory() as scratch:
+        source = Path(scratch) / "source.usdc"
+        layer = Sdf.Layer.CreateNew(str(source))  # a crate file keeps values the text parser would refuse
+        layer.TransferContent(Sdf.Layer.FindOrOpen(str(valid_take / "capture.usda")))
+        if field == "metersPerUnit":
+            layer.pseudoRoot.SetInfo(UsdGeom.Tokens.metersPerUnit, value)
+        else:
+            setattr(layer, field, value)
+        layer.Save()
+        mesh = outcome([source], lambda: open_mesh_source(source))
+        if not (np.isfinite(value) and value > 0):
+            assert mesh is None
+        elif mesh is not None:
+            points = outcome([source], lambda: mesh.read(mesh.time_codes))
+            assert points is None or np.isfinite(points).all()

@@ -127,3 +127,13 @@ def test_bad_inputs_raise(take):
     bad[3, 4, 1] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         stabilize(bad, 120.0)
+
+
+def test_a_still_capture_solves_as_a_still_skull(take):
+    """Every frame repeats the first: nothing moved (not a tracker holding one fit), so the skull stays put."""
+    still = np.repeat(take.world[:1], 40, axis=0)
+    result = stabilize(still, take.fps)
+    assert result.tracked.all()
+    np.testing.assert_allclose(result.translate - result.translate[0], 0.0, atol=1e-5)  # cm: the solver's tolerance
+    assert np.degrees(quaternion.angle_between(result.orient, result.orient[:1])).max() < 1e-4
+    np.testing.assert_allclose(result.skull_points, result.skull_points[:1].repeat(40, axis=0), atol=1e-5)

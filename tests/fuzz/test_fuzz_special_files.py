@@ -1,0 +1,108 @@
+"""Paths that name no regular file (FIFOs, devices, sockets, links to them), given to every reader and command.
+
+Each must end at once in a one-line error naming the path: a FIFO would block a reader
+until a writer comes, a device would feed it forever. A writer arrives at every FIFO after
+30 s, so a regression fails instead of hanging the suite.
+"""
+import contextlib
+import io
+import os
+import socket
+import tempfile
+import threading
+from pathlib import Path
+
+import pytest
+from hypothesis import event, given
+from hypothesis import strategies as st
+
+from facedyn.cli import main
+from facedyn.errors import FacedynError
+
+pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo") or not hasattr(socket, "AF_UNIX"), reason="FIFOs and sockets are POSIX")
+
+KINDS = ("fifo", "socket", "/dev/null", "/dev/zero", "link to fifo")
+SUFFIXES = (".usda", ".usdc", ".usd", ".fdyn", ".bvh", ".obj", ".csv", ".txt", "")
+
+
+def _reader(name):
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.io import bvh, livelink, obj
+    from facedyn.usd.source import open_mesh_source
+    from facedyn.usd.take import read_take
+
+    return {
+        "read_take": read_take, "load_model": load_model, "open_mesh_source": open_mesh_source, "read_bvh": bvh.read_bvh,
+        "read_obj": obj.read_obj, "read_livelink_csv": lambda p: livelink.read_livelink_csv(p, ["jawOpen"]),
+    }[name]
+
+
+READERS = ("read_take", "load_model", "open_mesh_source", "read_bvh", "read_obj", "read_livelink_csv")
+COMMANDS = ("import", "inspect", "validate", "layers", "stabilize --actor", "remove --model", "batch")
+
+
+def _special(kind: str, folder: Path, suffix: str) -> Path:
+    if kind.startswith("/dev/"):
+        return Path(kind)
+    path = folder / f"special{suffix}"
+    if kind == "socket":
+        server = socket.socket(socket.AF_UNIX)
+        server.bind(str(path))
+        server.close()  # the socket file stays
+    else:
+        target = folder / f"pipe{suffix}" if kind == "link to fifo" else path
+        os.mkfifo(target)
+        if kind == "link to fifo":
+            path.symlink_to(target)
+    return path
+
+
+def _unblock_later(folder: Path, done: threading.Event) -> None:
+    if done.wait(30):
+        return
+    for path in folder.iterdir():
+        try:
+            os.close(os.open(path, os.O_WRONLY | os.O_NONBLOCK))
+        except OSError:
+            pass
+
+
+def _command(name: str, path: Path, folder: Path) -> list[str]:
+    out = str(folder / "out" / "layer.usdc")
+    return {
+        "import": ["import", str(path), "-o", out], "inspect": ["inspect", str(path)], "validate": ["validate", str(path)],
+        "layers": ["layers", str(path)], "stabilize --actor": ["stabilize", str(folder / "t.usda"), "--actor", str(path), "-o", out],
+        "remove --model": ["remove", str(folder / "t.usda"), "--model", str(path), "-o", out],
+        "batch": ["batch", str(path), "-o", str(folder / "out"), "--steps", "import"],
+    }[name]
+
+
+@given(st.sampled_from(KINDS), st.sampled_from(SUFFIXES), st.sampled_from(READERS + COMMANDS))
+def test_special_files_end_in_one_line_naming_them(kind, suffix, user):
+    if kind.startswith("/dev/") and not os.path.exists(kind):
+        return
+    event(f"special: {kind}")
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = Path(scratch)
+        path = _special(kind, folder, suffix)
+        done = threading.Event()
+        threading.Thread(target=_unblock_later, args=(folder, done), daemon=True).start()
+        try:
+            if user in READERS:
+                with pytest.raises(FacedynError) as error:
+                    _reader(user)(path)
+                message = str(error.value)
+                assert str(path) in message and "\n" not in message, message
+            else:
+                stderr = io.StringIO()
+                with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(io.StringIO()):
+                    try:
+                        code = main(_command(user, path, folder))
+                    except SystemExit as exc:
+                        code = exc.code
+                err = stderr.getvalue()
+                assert code == 2, err
+                assert str(path) in err and len(err.strip().splitlines()) == 1, err
+                assert not (folder / "out").exists()
+        finally:
+            done.set()
