@@ -127,7 +127,8 @@ def vertex_response(world: np.ndarray, translate: np.ndarray, orient: np.ndarray
         acceleration = np.gradient(np.gradient(carried, axis=0), axis=0) * (fps * fps)
         acceleration = np.einsum("fji,fnj->fni", rot, acceleration)  # in the frame
         displacement = np.einsum("fji,fnj->fni", rot, world[:, used] - translate[:, None]) - points
-        displacement, acceleration = filtfilt(band, displacement), filtfilt(band, acceleration)
+        filtered = filtfilt(band, np.concatenate([displacement, acceleration], axis=2))  # one pass for both
+        displacement, acceleration = filtered[..., :3], filtered[..., 3:]
         fields[:, start:start + len(used)] = _fit(displacement, acceleration, np.gradient(acceleration, axis=0) * fps)
     return Response(*fields)
 
