@@ -40,7 +40,7 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     commands.required = True
     requested = next((a for a in argv if not a.startswith("-")), None)
     # Summaries import every processor's module: only a top-level --help (or no arguments) lists them.
-    wants_help = not argv or argv[0] in ("-h", "--help")
+    wants_help = not argv or (requested is None and any(a in ("-h", "--help") for a in argv))
     for name in registry.available():
         if name == requested:
             add_processor_parser(commands, registry.load(name))
