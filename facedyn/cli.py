@@ -39,7 +39,8 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     commands.required = True
     requested = next((a for a in argv if not a.startswith("-")), None)
-    wants_help = requested is None or requested in ("-h", "--help") or any(a in ("-h", "--help") for a in argv[:1])
+    # Summaries import every processor's module: only a top-level --help (or no arguments) lists them.
+    wants_help = not argv or (requested is None and any(a in ("-h", "--help") for a in argv))
     for name in registry.available():
         if name == requested:
             add_processor_parser(commands, registry.load(name))
@@ -67,7 +68,8 @@ def _tool(commands, name: str, help_text: str, handler, operand: tuple[str, str]
         p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     else:
         common_flags(p, json_help)
-    p.set_defaults(handler=handler)
+    # Their handlers import facedyn.usd's modules (which register the plugins) only where they read USD.
+    p.set_defaults(handler=handler, uses_usd=False)
     return p
 
 
@@ -133,7 +135,6 @@ def _cmd_env(args) -> int:
 
 def _cmd_inspect(args) -> int:
     from facedyn.io.files import check_not_special
-    from facedyn.usd.inspect import describe_take, format_description
 
     check_not_special(args.path)
     if args.path.is_file() and not args.path.suffix.lower().startswith(".usd"):
@@ -142,6 +143,8 @@ def _cmd_inspect(args) -> int:
         model = describe_model(args.path)
         print(json.dumps(model, indent=2, default=str) if args.json else "\n".join(f"{k}: {v}" for k, v in model.items()))
         return EXIT_OK
+    from facedyn.usd.inspect import describe_take, format_description
+
     description = describe_take(args.path)
     print(json.dumps(description, indent=2, default=str) if args.json else format_description(description))
     return EXIT_OK
@@ -194,10 +197,20 @@ def _cmd_validate(args) -> int:
 
 
 def _version_text() -> str:
-    import facedyn
-    from facedyn.usd.plugin import usd_version
+    """facedyn's and USD's versions; USD's from its package metadata where installed as usd-core, so
+    --version does not load USD."""
+    from importlib import metadata
 
-    return f"usdfacedyn {facedyn.__version__} (USD {usd_version()})"
+    import facedyn
+
+    try:
+        major, minor = metadata.version("usd-core").split(".")[:2]  # 24.8 is USD 24.08
+        usd = f"{int(major)}.{int(minor):02d}"
+    except (metadata.PackageNotFoundError, ValueError):  # a USD built from source: ask it
+        from facedyn.usd.plugin import usd_version
+
+        usd = usd_version()
+    return f"usdfacedyn {facedyn.__version__} (USD {usd})"
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """`usdfacedyn demo`: the whole pipeline on the built-in face, measured against truth.
 
 1. simulate a small corpus (the papers' protocol at demo scale, with a procedural talking
-   face under every motion: facedyn.sim.speech) with known truth;
+   face under every motion: facedyn.sim.speech) with known truth, into a temporary folder
+   unless --keep-corpus true keeps it in DIR/corpus for the next run;
 2. simulate a new performance (a held smile while walking, with tracking noise);
 3. make the actor from the rig (`usdfacedyn actor`: the skull frame the corpus and the
    models share) and stabilize the take into it (mode pursuit with --actor, and the
@@ -23,6 +24,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -57,8 +59,10 @@ PATH = ("recommended path: actor from the rig (the skull frame), take stabilized
 
 
 class Demo:
-    def __init__(self, output: Path, scale: str, rig_path: Path | None, data: Path | None, progress: Progress):
+    def __init__(self, output: Path, scale: str, rig_path: Path | None, data: Path | None, progress: Progress,
+                 keep_corpus: bool = False):
         self.output = Path(output)
+        self.keep_corpus = keep_corpus
         self.settings = SCALES[scale]
         self.scale = scale
         self.rig_path = rig_path
@@ -76,19 +80,37 @@ class Demo:
 
     def run(self) -> dict:
         from facedyn.processors.simulate import load_rig
-        from facedyn.sim.corpus import TakeSpec, protocol, simulate_take
-        from facedyn.usd.corpus import build_corpus, write_simulated_take
+        from facedyn.sim.corpus import protocol
 
         self.output.mkdir(parents=True, exist_ok=True)
         rig = self.step("load rig", lambda: load_rig(self.rig_path))
-        corpus = self.output / "corpus"
         specs = protocol(rig, self.settings["corpus"], self.data, seed=0, noise_cm=NOISE_CM)
         description = {"scale": self.scale, "rig": rig.name, "points": rig.point_count, "takes": [s.name for s in specs], "noise_cm": NOISE_CM}
-        if _existing_corpus(corpus) == description:
-            print(f"[demo] reusing the corpus in {corpus} (same rig, protocol and noise)", file=sys.stderr)
-        else:
-            self.step(f"simulate corpus ({len(specs)} takes)", lambda: build_corpus(
-                corpus, rig, specs, progress=self.progress, description=description, jobs=os.cpu_count() or 1))
+        kept = self.output / "corpus"
+        if _existing_corpus(kept) == description:
+            print(f"[demo] reusing the corpus in {kept} (same rig, protocol and noise)", file=sys.stderr)
+            return self.run_on(rig, kept)
+        if self.keep_corpus:
+            self.simulate_corpus(kept, rig, specs, description)
+            return self.run_on(rig, kept)
+        # The corpus (about 1.2 GB at demo scale) only feeds training: by default it lives in a temporary
+        # folder that goes when the demo ends, so the output folder holds what a user looks at.
+        with tempfile.TemporaryDirectory(prefix="facedyn-demo-corpus-") as scratch:
+            corpus = Path(scratch) / "corpus"
+            self.simulate_corpus(corpus, rig, specs, description)
+            return self.run_on(rig, corpus)
+
+    def simulate_corpus(self, corpus: Path, rig, specs, description: dict) -> None:
+        from facedyn.usd.corpus import build_corpus
+
+        self.step(f"simulate corpus ({len(specs)} takes)", lambda: build_corpus(
+            corpus, rig, specs, progress=self.progress, description=description, jobs=os.cpu_count() or 1))
+
+    def run_on(self, rig, corpus: Path) -> dict:
+        """Every step after the corpus: a new performance through the pipeline, checked against its truth."""
+        from facedyn.sim.corpus import TakeSpec, simulate_take
+        from facedyn.usd.corpus import write_simulated_take
+
         spec = TakeSpec("performance", "walk", "smile", duration_s=self.settings["seconds"], seed=777, noise_cm=NOISE_CM)
         take_dir = self.output / "take"
         truth = self.step("simulate a new performance", lambda: simulate_take(rig, spec))
@@ -262,6 +284,8 @@ class DemoProcessor(Processor):
         Parameter("scale", str, "demo", "corpus and training size (demo: a few minutes)", tuple(SCALES)),
         Parameter("rig", Path, None, "a UsdSkel blend-shape rig instead of the built-in face", metavar="RIG"),
         Parameter("data", Path, None, "a ../shared/data-like folder: adds dialog takes to the corpus", metavar="DIR"),
+        Parameter("keep_corpus", bool, False, "keep the simulated corpus (about 1.2 GB) in DIR/corpus, where a later "
+                  "demo reuses it; otherwise it is simulated into a temporary folder and removed"),
     )
 
     def prepare(self, request: Request) -> Plan:
@@ -269,12 +293,13 @@ class DemoProcessor(Processor):
 
         params = request.params
         check_data_folder(params["data"], SCALES[params["scale"]]["corpus"])
-        return Plan({"scale": params["scale"], "rig": str(params["rig"] or "built-in"), "output": str(request.output)}, request)
+        return Plan({"scale": params["scale"], "rig": str(params["rig"] or "built-in"), "output": str(request.output),
+                     "corpus": str(Path(request.output) / "corpus") if params["keep_corpus"] else "temporary"}, request)
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
         request = plan.state
         params = request.params
-        summary = Demo(request.output, params["scale"], params["rig"], params["data"], progress).run()
+        summary = Demo(request.output, params["scale"], params["rig"], params["data"], progress, params["keep_corpus"]).run()
         (Path(request.output) / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
         return FolderOutput(summary)
 

@@ -48,5 +48,6 @@ def test_the_demo_runs_the_recommended_path_end_to_end_and_beats_doing_nothing(t
     assert take_skull_frame(stabilized) == read_actor(out / "actor.usda").skull_frame == removal.info["skull_frame"]
     assert "what the rows mean" in format_summary(summary)
     assert (out / "take" / "take.usda").is_file() and (out / "contact_sheet.png").is_file()
+    assert not (out / "corpus").exists()  # simulated into a temporary folder (--keep-corpus true keeps it)
     assert results["offset_maps"] and all(p.endswith(".exr") for p in results["offset_maps"])
     assert json.loads((out / "summary.json").read_text())["results"].keys() == results.keys()

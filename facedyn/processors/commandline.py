@@ -37,15 +37,18 @@ def run_guarded(argv: list[str], build) -> int:
     # Read .usdc values with pread, not mmap: a mapped multi-GB take counts every page a
     # streaming step has touched in its resident memory; read, it stays a chunk's worth.
     os.environ.setdefault("USDC_USE_PREAD", "1")
-    try:
-        import facedyn.usd  # noqa: F401  (registers the USD plugins; fails with a clear message if it cannot)
-    except Exception as exc:
-        return fail(f"usdfacedyn: error: {exc}", EXIT_FAILURE, as_json)
     from facedyn.errors import FacedynError, UsageError
 
     try:
         with signals_raise():
             args = build().parse_args(argv)
+            # USD (0.2-0.3 s) loads once a command that uses it runs, not for --help, --version or a usage
+            # error; a command that sets uses_usd=False imports facedyn.usd itself where it needs it.
+            if getattr(args, "uses_usd", True):
+                try:
+                    import facedyn.usd  # noqa: F401  (registers the USD plugins; fails with a clear message if it cannot)
+                except Exception as exc:
+                    return fail(f"usdfacedyn: error: {exc}", EXIT_FAILURE, as_json)
             return args.handler(args)
     except Interrupted as exc:
         return fail(f"usdfacedyn: interrupted ({exc.name})", 128 + exc.number, as_json)

@@ -21,14 +21,15 @@ from facedyn.stabilize.dropped import bridge_dropped, tracked_frames
 from facedyn.stabilize.fast import FastSolver
 from facedyn.stabilize.inertia import InertiaCheck, check_frame
 from facedyn.stabilize.modepursuit import StageRecord, mode_pursuit
-from facedyn.stabilize.rigidity import RigidModel, discover_rigid_mode, estimate_rigidity
+from facedyn.stabilize.rigidity import FIT_VERTICES, ICP_ITERATIONS, RigidModel, discover, estimate_rigidity
 from facedyn.stabilize.schedule import Schedule
 from facedyn.stabilize.smoothing import smooth_skull_motion
 
 METHODS = ("three-point", "procrustes", "icp", "mode-pursuit")
 SOLVERS = ("fast", "reference")
-INIT_ICP_ITERATIONS = 5
-INIT_VERTICES = 1024  # vertices the initial ICP fits on, at most: as accurate as all 2,590 of a face's rigid region
+# the initial ICP's iterations, and the vertices it fits on at most (as accurate as all 2,590 of a face's rigid
+# region): the rigidity discovery's, whose fit of the frames it checks is then the initialization (_reuse_fit)
+INIT_ICP_ITERATIONS, INIT_VERTICES = ICP_ITERATIONS, FIT_VERTICES
 
 
 @dataclass
@@ -155,10 +156,11 @@ def stabilize(
     timings: dict[str, float] = {}
 
     t0 = time.perf_counter()
-    model = None
+    model = discovery = None
     if method == "mode-pursuit" and weights is None and (rest is None or prior is not None):
         if prior is None:
-            model, _ = discover_rigid_mode(world, fps)  # the solved frame is checked again below
+            discovery = discover(world, fps)  # the solved frame is checked again below
+            model = discovery.model
         else:
             model = estimate_rigidity(world, prior)
         weights = model.weights
@@ -179,7 +181,10 @@ def stabilize(
                               most_vertices=INIT_VERTICES)
 
     t0 = time.perf_counter()
-    if method == "mode-pursuit":
+    if method == "mode-pursuit" and discovery is not None and init == "icp":
+        rot, trans = _reuse_fit(discovery, frames, lambda frames: align_weighted(
+            world[frames], target, init, weights, icp_iterations=INIT_ICP_ITERATIONS, most_vertices=INIT_VERTICES))
+    elif method == "mode-pursuit":
         rot, trans = initial_alignment(target)
     else:
         rot, trans = align_weighted(world, target, method, weights, three_point)
@@ -240,6 +245,18 @@ def stabilize(
     result.history = out.history
     result.timings["total"] = time.perf_counter() - t_total
     return result
+
+
+def _reuse_fit(discovery, count: int, align) -> tuple[np.ndarray, np.ndarray]:
+    """The initial alignment of all `count` frames, reusing the discovery's fit of the frames it checked (the same
+    robust ICP on the same vertices to the same rest: rigidity.Discovery); align(frames) fits the frames outside."""
+    rot, trans = np.empty((count, 3, 3)), np.empty((count, 3))
+    inside = discovery.frames
+    rot[inside], trans[inside] = discovery.rot, discovery.trans
+    for outside in (slice(0, inside.start), slice(inside.stop, count)):
+        if outside.stop > outside.start:
+            rot[outside], trans[outside] = align(outside)
+    return rot, trans
 
 
 def align_weighted(world, target, method, weights, three_point=None, most_vertices=None, **options):

@@ -33,9 +33,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 from facedyn.geometry import quaternion
+from facedyn.stabilize.bandpass import butter_bandpass, filtfilt
 from facedyn.stabilize.rest import sample_frames
 
 BAND_HZ = (0.7, 15.0)  # the head's motion: walking and running (1-5 Hz) to platforms (up to 15 Hz); top <= fps / 4
@@ -118,8 +118,7 @@ def vertex_response(world: np.ndarray, translate: np.ndarray, orient: np.ndarray
     """Each vertex's displacement from its rest fitted as alpha a + beta da/dt, a the frame's acceleration there,
     both in the frame and band-passed to BAND_HZ (least squares over the frames and axes), a block of vertices at a time."""
     rot = quaternion.to_matrix(orient)
-    top = min(BAND_HZ[1], fps / 4.0)
-    band = butter(2, [BAND_HZ[0] / (0.5 * fps), top / (0.5 * fps)], btype="band", output="sos")
+    band = butter_bandpass(BAND_HZ[0], min(BAND_HZ[1], fps / 4.0), fps)
     fields = np.empty((3, len(vertices)))
     for start in range(0, len(vertices), block):
         used = vertices[start:start + block]
@@ -128,7 +127,8 @@ def vertex_response(world: np.ndarray, translate: np.ndarray, orient: np.ndarray
         acceleration = np.gradient(np.gradient(carried, axis=0), axis=0) * (fps * fps)
         acceleration = np.einsum("fji,fnj->fni", rot, acceleration)  # in the frame
         displacement = np.einsum("fji,fnj->fni", rot, world[:, used] - translate[:, None]) - points
-        displacement, acceleration = sosfiltfilt(band, displacement, axis=0), sosfiltfilt(band, acceleration, axis=0)
+        filtered = filtfilt(band, np.concatenate([displacement, acceleration], axis=2))  # one pass for both
+        displacement, acceleration = filtered[..., :3], filtered[..., 3:]
         fields[:, start:start + len(used)] = _fit(displacement, acceleration, np.gradient(acceleration, axis=0) * fps)
     return Response(*fields)
 

@@ -31,7 +31,9 @@ from facedyn.stabilize import inertia
 from facedyn.stabilize import rest as rest_estimate
 from facedyn.stabilize.inertia import InertiaCheck
 
-SAMPLE_FRAMES = 480  # evenly spaced frames the statistics are taken over
+# evenly spaced frames the statistics are taken over: a 90 % quantile and a mode need no more (with 480, twice
+# the cost, the 651-frame dialog and synthetic takes solved to the same errors)
+SAMPLE_FRAMES = 240
 ROUNDS = 3
 SPREAD_QUANTILE = 90.0  # per-vertex distance to rest not exceeded in this % of frames
 # the noise floor: the spread this % of vertices stay below. Not the very stillest few:
@@ -48,7 +50,7 @@ ZERO_WEIGHT = 1.3
 ICP_ITERATIONS = 5
 MIN_RIGID = 3
 WINDOW_SECONDS = 20.0  # consecutive seconds the inertia check of a discovered mode looks at
-FIT_VERTICES = 1024  # of the mode's vertices, evenly strided, that fit its frame for that check
+FIT_VERTICES = 1024  # of the weighted vertices, evenly strided, that fit each frame (the rounds, the check)
 
 
 @dataclass
@@ -141,7 +143,9 @@ def estimate_rigidity(
         rest, weights = prior.rest, prior.weights
         candidates = prior.weights >= 1.0
     for round_ in range(rounds):
-        rot, trans, _ = rigid.robust_icp(sample, rest, weights, iterations=ICP_ITERATIONS)
+        # the frames' fit needs no more than FIT_VERTICES of the weighted vertices; every vertex's spread is then measured
+        fit = _fit_vertices(weights)
+        rot, trans, _ = rigid.robust_icp(sample[:, fit], rest[fit], weights[fit], iterations=ICP_ITERATIONS)
         aligned = rigid.apply(rot, trans, sample)
         if prior is None:  # the median while the frame settles, the mode at the end
             last = round_ == rounds - 1
@@ -154,6 +158,12 @@ def estimate_rigidity(
         if np.count_nonzero(weights) < MIN_RIGID:  # nothing stands out: every vertex counts
             weights = np.ones(n)
     return RigidModel(weights, rest, spread, floor)
+
+
+def _fit_vertices(weights: np.ndarray) -> np.ndarray:
+    """At most FIT_VERTICES of the vertices of positive weight, evenly strided: enough for a rigid fit of a frame."""
+    fitted = np.flatnonzero(weights > 0)
+    return fitted[rest_estimate.sample_frames(len(fitted), FIT_VERTICES)]  # evenly spaced indices
 
 
 def noise_floor(spread: np.ndarray, candidates: np.ndarray | None = None) -> float:
@@ -177,6 +187,26 @@ def rigidity_weights(relative_spread: np.ndarray) -> np.ndarray:
     return 1.0 - t * t * (3.0 - 2.0 * t)
 
 
+@dataclass
+class Discovery:
+    """A discovered rigid mode, its inertia check, and the fit that check made: each checked frame (the take's
+    middle WINDOW_SECONDS) aligned to the mode's rest on its weights by robust ICP (ICP_ITERATIONS, at most
+    FIT_VERTICES vertices), which is mode pursuit's initial alignment of those frames, so stabilize reuses it."""
+
+    model: RigidModel
+    check: InertiaCheck | None
+    frames: slice  # the take's frames the fit covers
+    rot: np.ndarray  # (W, 3, 3) world -> skull
+    trans: np.ndarray  # (W, 3)
+
+
+def discover(world: np.ndarray, fps: float) -> Discovery:
+    """discover_rigid_mode on a whole take of consecutive frames, with the fit of its middle frames."""
+    frames = middle_window(len(world), fps)
+    model, (check, _, rot, trans) = _discover(world, world[frames], fps)
+    return Discovery(model, check, frames, rot, trans)
+
+
 def discover_rigid_mode(world: np.ndarray, fps: float, window: np.ndarray | None = None) -> tuple[RigidModel, InertiaCheck | None]:
     """The rigid mode of a plain capture, and its inertia check: the skull's, not a sliding block's, where the data tell.
 
@@ -194,18 +224,24 @@ def discover_rigid_mode(world: np.ndarray, fps: float, window: np.ndarray | None
     where it cannot, the check stays suspect and stabilize warns.
     """
     window = world if window is None else window
-    window = window[middle_window(len(window), fps)]
+    model, (check, *_) = _discover(world, window[middle_window(len(window), fps)], fps)
+    return model, check
+
+
+def _discover(world: np.ndarray, window: np.ndarray, fps: float):
+    """The mode (re-seeded where the first one's frame is suspect) and its check of `window` (_inertia's answer)."""
     model = estimate_rigidity(world)
-    check, frame = _inertia(model, window, fps)
+    checked = _inertia(model, window, fps)
+    check, frame = checked[0], checked[1]
     if check is None or not check.suspect:
-        return model, check
+        return model, checked
     seed = inertia.skull_seed(window, *frame, model.rest, fps)
     if seed is None or np.count_nonzero(seed) < MIN_RIGID:
-        return model, check
+        return model, checked
     reseeded = estimate_rigidity(world, seed=seed)
-    again, _ = _inertia(reseeded, window, fps)
-    if again is None or again.suspect or again.feeding >= check.feeding:
-        return model, check
+    again = _inertia(reseeded, window, fps)
+    if again[0] is None or again[0].suspect or again[0].feeding >= check.feeding:
+        return model, checked
     return reseeded, again
 
 
@@ -217,12 +253,12 @@ def middle_window(frames: int, fps: float) -> slice:
 
 
 def _inertia(model: RigidModel, window: np.ndarray, fps: float):
-    """The inertia check of the frame a robust fit on the model's weights gives each window frame, and that frame."""
-    fitted = np.flatnonzero(model.weights > 0)
-    fitted = fitted[rest_estimate.sample_frames(len(fitted), FIT_VERTICES)]  # evenly spaced, enough for a rigid fit
+    """The inertia check of the frame a robust fit on the model's weights gives each window frame, that frame
+    (skull to world: translate, orient), and the fit (world to skull: rot, trans)."""
+    fitted = _fit_vertices(model.weights)
     rot, trans, _ = rigid.robust_icp(window[:, fitted].astype(np.float64), model.rest[fitted], model.weights[fitted],
                                      iterations=ICP_ITERATIONS)
     to_world = np.transpose(rot, (0, 2, 1))  # the fit maps world to skull: skull = R world + t
     frame = (-np.einsum("fij,fj->fi", to_world, trans), quaternion.from_matrix(to_world))
-    return inertia.check_frame(window, *frame, model.rest, np.flatnonzero(model.weights == 0), fps), frame
+    return inertia.check_frame(window, *frame, model.rest, np.flatnonzero(model.weights == 0), fps), frame, rot, trans
 
