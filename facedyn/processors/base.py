@@ -130,6 +130,7 @@ class Writes:
     metavar: str = "LAYER"
     help: str = ""
     default: str | None = None  # a default output (else -o is required)
+    resumable: bool = False  # a folder whose finished parts a failed run leaves for the next run to resume from
 
 
 @dataclass

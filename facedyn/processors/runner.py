@@ -4,7 +4,8 @@ What happens to the output depends only on what the processor declares it writes
 - a layer is written with its role and provenance and, with `--attach` (or an import's
   root), placed in the take root by role, under the root's lock;
 - a file (a model, an actor asset) is saved atomically by the function the processor returns;
-- a folder is removed again when the run fails and the folder did not exist before.
+- a folder is removed again when the run fails and the folder did not exist before (but for a
+  resumable one, whose finished parts a re-run resumes from).
 Missing folders of the output are created (and removed again if the run fails).
 """
 from __future__ import annotations
@@ -41,7 +42,7 @@ def execute(processor: Processor, request: Request, progress: Progress, dry_run:
         report["dry_run"] = True
         return report
     writes = processor.writes.what
-    created_folder = writes == "folder" and not request.output.exists()
+    created_folder = writes == "folder" and not processor.writes.resumable and not request.output.exists()
     made = _make_folders(request.output.parent)
     try:
         output = processor.run(plan, progress)
