@@ -109,13 +109,14 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
     candidates = RIDGES if ridge is None and len(session) > 1 else (RIDGE if ridge is None else float(ridge),)
     left_by_ridge, fits = {}, {}
     for candidate in candidates:
-        fits[candidate] = _session_fit(session, sums, candidate, model)
-        left_by_ridge[candidate] = _left(session, sums, candidate, fits[candidate], model) if len(session) > 1 else None
+        session_fit = _session_fit(session, sums, candidate, model)
+        fits[candidate] = session_fit[:2]  # the fit and its beta: a session's targets are large
+        left_by_ridge[candidate] = _left(session, sums, candidate, session_fit, model) if len(session) > 1 else None
         if on_candidate is not None and len(candidates) > 1:
             on_candidate()
     ridge = min(left_by_ridge, key=lambda r: left_by_ridge[r]) if len(candidates) > 1 else candidates[0]
     left = left_by_ridge[ridge]
-    (weights, scale), beta, _ = fits[ridge]
+    (weights, scale), beta = fits[ridge][:2]
     network = _linear_network(model.network.spec, weights, scale)
     record = {"response": "linear", "takes": described, "rows": int(sum(len(rows.targets) for rows in session)), "settle_s": float(settle_s),
               "ridge": ridge, "session_cross_validated_left": None if left is None else round(left, 4),
@@ -172,8 +173,7 @@ def _fits_without_each(session: list, sums: "_Sums", ridge: float, session_fit: 
     leaving a take out costs one solve, not a refit with its alternation over every other
     take (on a 70-take session, 70 refits per candidate penalty took more than an hour).
     """
-    _, beta, targets = session_fit
-    moments = _moments(session, targets)
+    _, beta, targets, moments = session_fit
     for rows, target in zip(session, targets):
         own = _moments([rows], [target])
         solve = _solver(sums - _Sums.of(rows), ridge, len(model.face.landmarks), model.skull_input.width)
@@ -236,8 +236,8 @@ def _moments(session: list, targets: list) -> tuple[np.ndarray, np.ndarray]:
     return bt, rt
 
 
-def _session_fit(session: list, sums: _Sums, ridge: float, model: DynamicsModel) -> tuple[tuple, float, list]:
-    """((weights, scale), hardening beta, targets): the response and the tissue's stiffening
+def _session_fit(session: list, sums: _Sums, ridge: float, model: DynamicsModel) -> tuple:
+    """((weights, scale), hardening beta, targets, their moments): the response and the tissue's stiffening
     fitted together on the session by alternation (facedyn.dynamics.hardening): each fitted to
     what the other leaves, its rounds; targets: each take's that the last solve fitted (its
     centred skin less beta times its load under the fit before)."""
@@ -245,12 +245,13 @@ def _session_fit(session: list, sums: _Sums, ridge: float, model: DynamicsModel)
     solved = []
 
     def solve_for(targets: list) -> tuple:
-        solved[:] = [targets]  # the last only: a session's targets are large
-        return solve(*_moments(session, targets))
+        moments = _moments(session, targets)
+        solved[:] = [(targets, moments)]  # the last only: a session's targets are large
+        return solve(*moments)
 
     fit, beta = fit_hardening(solve_for, lambda fit: _centred_loads(session, fit, model),
                               lambda fit: [(rows.features / fit[1]) @ fit[0] for rows in session], [rows.targets for rows in session])
-    return fit, beta, solved[-1]
+    return (fit, beta, *solved[-1])
 
 
 def _centred_loads(session: list, fit: tuple, model: DynamicsModel) -> list:
@@ -347,7 +348,8 @@ def remove_left_out(model: DynamicsModel, takes: list) -> list[tuple[np.ndarray,
     others, in order: [(quasistatic skull-space points, offsets)], float32.
 
     What the response does to a take it has seen flatters it; refitted without the take (the
-    model's own settle and ridge), it removes as it would from a new capture, so its
+    model's own settle and ridge, its normal equations downdated, the session's stiffening
+    kept: `_fits_without_each`), it removes as it would from a new capture, so its
     figures on its session compare with a removal model's (`usdfacedyn evaluate --session
     --removal RESPONSE`). takes: TrainingSequences, exactly the model's calibration takes.
     """

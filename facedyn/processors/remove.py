@@ -29,6 +29,7 @@ from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Rea
 from facedyn.progress import Progress
 
 CHUNK_FRAMES = 1024  # frames computed, held and written (one value clip of a long take) at a time
+REMOVES = ("removal", "response")  # the model kinds that remove: network F, an actor's linear response
 
 
 class RemoveProcessor(Processor):
@@ -101,9 +102,6 @@ def removal_models(path: Path, flag: str, perf, fps: float, take: Path) -> list:
                              "make; this needs a removal model (F), an actor's linear response (.response) or a blend of them")
         check_skull_frame(take, perf, path, model)
     return models
-
-
-REMOVES = ("removal", "response")  # the model kinds that remove
 
 
 def removal_of(points, translate, orient, fps: float, model, backend: str = "auto", device: str = "auto") -> tuple[np.ndarray, np.ndarray]:

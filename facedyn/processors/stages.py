@@ -74,6 +74,7 @@ class Stages:
                 shutil.rmtree(path)
             elif path.exists():
                 path.unlink()
+        self.progress.start(f"{name}: running", 1)
         started = time.perf_counter()
         result = compute()
         self.done[name] = {"key": key, "seconds": round(time.perf_counter() - started, 1), "result": result}
