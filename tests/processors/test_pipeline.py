@@ -210,7 +210,7 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     candidates = fitted.info["calibration"]["ridge_candidates"]
     assert set(candidates) == {"0.01", "0.03", "0.1", "0.3", "1"} and candidates[f"{chosen:g}"] == min(candidates.values())
     for name in ("given", "again"):  # --ridge: the chosen penalty given fits the same response without choosing
-        assert cli("train-synthesis", *session, "-o", tmp_path / f"{name}.synthesis", "--calibrate", models / "h.synthesis", "--response",
+        assert cli("train-synthesis", *session, "-o", tmp_path / f"{name}.response", "--calibrate", models / "h.synthesis", "--response",
                    "linear", "--skull", "truth", "--settle", "0.3", "--ridge", str(chosen)) == 0
     assert (tmp_path / "again.response").read_bytes() == (tmp_path / "given.response").read_bytes()  # same inputs, same bytes
     given = load_model(tmp_path / "given.response")
