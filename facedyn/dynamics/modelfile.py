@@ -24,13 +24,18 @@ detect changes, they do not authenticate an author. Version 1 files, written bef
 checksums, still load, with a warning in `DynamicsModel.warnings` saying to re-save them.
 
 The metadata says what the model may be used on: its kind ("removal" for F, "synthesis"
-for H), frame rate, feature windows (and for H the kind of skull-motion input), the
+for H, "response" for an actor's linear response, facedyn.dynamics.response), frame rate, feature windows (and for H the kind of skull-motion input), the
 topology's fingerprint, skull landmarks and skin sample indices, plus how it was trained
 (takes, settings, loss curve, validation errors). The arrays are the network's weights and
 normalization, the neutral mesh and rigid region that propagation is rebuilt from, and
 any kind-specific arrays (``DynamicsModel.arrays``, e.g. the uv neighbourhoods that H's
 stretch features need). `ModelMismatch` is raised when a model meets a mesh or a take it
-does not fit.
+does not fit. Response files written before the kind existed say "synthesis" with
+`calibration.response` "linear"; they load as kind "response".
+
+A blend (kind "blend", `save_blend`) holds whole models in one file, each member's metadata
+under `members` and its arrays under `member<i>/`: what `remove --model` takes to remove
+the mean of their dynamics, as `--blend` does; `load_models` reads it (and any one model).
 """
 from __future__ import annotations
 
@@ -56,7 +61,10 @@ from facedyn.performance import Topology
 MAGIC = b"FDYNMDL1"
 FORMAT_VERSION = 2
 UNCHECKED_VERSIONS = (1,)  # readable, but written before checksums
-KINDS = ("removal", "synthesis")
+KINDS = ("removal", "synthesis", "response")
+BLEND = "blend"
+SUFFIXES = {"removal": ".removal", "synthesis": ".synthesis", "response": ".response", BLEND: ".blend"}
+NETWORK_NAMES = {"removal": "F", "synthesis": "H", "response": "linear response (actor's)"}
 FPS_RANGE = (1.0, 10000.0)
 MAX_FILE_BYTES = 4 << 30
 MAX_HEADER_BYTES = 16 << 20
@@ -69,6 +77,7 @@ CHUNK_BYTES = 512 << 20  # what one chunk of frames may allocate when a model is
 FRAME_BYTES_FLOOR = 64 << 20  # what applying any model may allocate for one frame (see _check_sizes)
 _SAMPLE_POSITIONS = "sample_positions"  # F's per-sample rest positions (facedyn.dynamics.removal.SAMPLE_POSITIONS)
 _STRETCH_SAMPLES = "stretch/samples"  # H's stretch neighbourhoods' samples (facedyn.dynamics.synthesis)
+MAX_MEMBERS = 8
 _DTYPES = {"float32": np.float32, "float64": np.float64, "int32": np.int32, "int64": np.int64}
 _RESERVED = ("format", "version", "kind", "fps", "windows", "architecture", "topology_fingerprint", "point_count", "skull_landmarks", "skin_samples", "normalization", "skull_motion")
 
@@ -83,7 +92,7 @@ class ModelMismatch(FacedynError):
 
 @dataclass
 class DynamicsModel:
-    kind: str  # "removal" (network F) or "synthesis" (network H)
+    kind: str  # "removal" (network F), "synthesis" (network H) or "response" (an actor's linear response)
     network: Network
     face: FaceSetup
     fps: float
@@ -142,7 +151,28 @@ def _canonical(value) -> bytes:
 def save_model(model: DynamicsModel, path) -> Path:
     """Write the model to ``path`` atomically (temporary file, then rename), mode 0644 under
     the usual umask, as format version FORMAT_VERSION with its checksums."""
-    path = Path(path)
+    metadata, arrays = _contents(model)
+    return _write(Path(path), metadata, arrays)
+
+
+def save_blend(models: list, path) -> Path:
+    """Write a blend of models (each a removal model or a linear response, one mesh and frame
+    rate) to ``path`` atomically: one file that removes the mean of their dynamics."""
+    if len(models) < 2 or any(m.kind not in ("removal", "response") for m in models):
+        raise ValueError(f"a blend holds two or more removal models or linear responses, got {[m.kind for m in models]}")
+    for other in models[1:]:
+        models[0].check_compatible(other.fingerprint, other.fps)
+    metadata = {"format": "facedyn-model", "version": FORMAT_VERSION, "kind": BLEND, "members": []}
+    arrays = {}
+    for i, model in enumerate(models):
+        member, member_arrays = _contents(model)
+        metadata["members"].append(member)
+        arrays.update({f"member{i}/{name}": value for name, value in member_arrays.items()})
+    return _write(Path(path), metadata, arrays)
+
+
+def _contents(model: DynamicsModel) -> tuple[dict, dict[str, np.ndarray]]:
+    """(metadata, arrays) of one model as its file stores them."""
     arrays = {f"network/{k}": v.detach().cpu().numpy() for k, v in model.network.state_dict().items()}
     face = model.face
     arrays.update({
@@ -170,7 +200,11 @@ def save_model(model: DynamicsModel, path) -> Path:
         **({"skull_motion": model.skull_motion.to_json()} if model.skull_motion is not None else {}),
         **model.info,
     }
-    metadata = json.loads(json.dumps(metadata))  # as a reader will see it (tuples as lists, ...)
+    return json.loads(json.dumps(metadata)), arrays  # as a reader will see it (tuples as lists, ...)
+
+
+def _write(path: Path, metadata: dict, arrays: dict[str, np.ndarray]) -> Path:
+    """The file of a metadata header and its arrays, with their checksums, atomically."""
     table, blobs, offset = {}, [], 0
     for name, arr in arrays.items():
         dtype = arr.dtype.name
@@ -312,10 +346,47 @@ def _version(path: Path, metadata: dict) -> int:
 
 
 def load_model(path, *, topology: Topology | str | None = None, fps: float | None = None) -> DynamicsModel:
-    """Load a model; with ``topology``/``fps`` given, check that it fits them (ModelMismatch)."""
-    model = _build(Path(path), _read(Path(path)))
+    """Load a model; with ``topology``/``fps`` given, check that it fits them (ModelMismatch).
+    A blend is refused here (ModelFileError): only removal reads one, through `load_models`."""
+    stored = _read(Path(path))
+    if stored.metadata.get("kind") == BLEND:
+        raise ModelFileError(f"{path} is a blend of {len(_members(Path(path), stored))} removal models; only remove --model and "
+                             "evaluate --removal take a blend")
+    model = _build(Path(path), stored)
     model.check_compatible(topology, fps)
     return model
+
+
+def load_models(path, *, topology: Topology | str | None = None, fps: float | None = None) -> list[DynamicsModel]:
+    """[the model] of a model file, or a blend's members (each checked like a model)."""
+    path = Path(path)
+    stored = _read(path)
+    models = [_build(path, stored)] if stored.metadata.get("kind") != BLEND else [_build(path, member) for member in _members(path, stored)]
+    for model in models:
+        model.check_compatible(topology, fps)
+    return models
+
+
+def _members(path: Path, stored: _Stored) -> list[_Stored]:
+    """A checked blend's members, each as a stored model of its own (its checksums are the blend's)."""
+    members = stored.metadata.get("members")
+    if not (isinstance(members, list) and 2 <= len(members) <= MAX_MEMBERS and all(isinstance(m, dict) for m in members)):
+        raise ModelFileError(f"{path}: a blend needs a list of 2 to {MAX_MEMBERS} member models, got {str(members)[:100]}")
+    parts = [{name.split("/", 1)[1]: arr for name, arr in stored.arrays.items() if name.startswith(f"member{i}/")}
+             for i in range(len(members))]
+    if sum(map(len, parts)) != len(stored.arrays):
+        raise ModelFileError(f"{path}: a blend holds arrays that belong to none of its {len(members)} members")
+    for member in members:
+        if member.get("kind") not in ("removal", "response") and not _legacy_response(member):
+            raise ModelFileError(f"{path}: a blend member of kind {str(member.get('kind'))[:40]!r}; a blend holds removal models "
+                                 "and linear responses")
+    return [_Stored(member, arrays, stored.checksums, stored.size) for member, arrays in zip(members, parts)]
+
+
+def _legacy_response(metadata: dict) -> bool:
+    """A linear response written before the kind existed: a synthesis model so calibrated."""
+    calibration = metadata.get("calibration")
+    return metadata.get("kind") == "synthesis" and isinstance(calibration, dict) and calibration.get("response") == "linear"
 
 
 def _build(path: Path, stored: _Stored) -> DynamicsModel:
@@ -324,6 +395,7 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
     try:
         spec = _architecture(path, metadata.get("architecture"), arrays)
         kind, fps, windows = metadata["kind"], metadata["fps"], metadata["windows"]
+        kind = "response" if _legacy_response(metadata) else kind
         if kind not in KINDS:
             raise ModelFileError(f"{path}: kind {str(kind)[:40]!r} is none of {', '.join(KINDS)}")
         if not (_number(fps) and FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
@@ -517,12 +589,21 @@ def describe_model(path) -> dict:
     was trained and validated, and its integrity (checksums, or warnings without them)."""
     path = Path(path)
     stored = _read(path)
+    if stored.metadata.get("kind") == BLEND:
+        members = [_describe(path, member) for member in _members(path, stored)]
+        return {"path": str(path), "format_version": stored.metadata["version"], "kind": BLEND,
+                "network": "the mean of " + " and ".join(m["network"] for m in members), "members": members,
+                "checksum": stored.checksums, "bytes": stored.size}
+    return {"path": str(path), **_describe(path, stored), "checksum": stored.checksums, "bytes": stored.size}
+
+
+def _describe(path: Path, stored: _Stored) -> dict:
+    """One model's part of `describe_model`."""
     model = _build(path, stored)
     return {
-        "path": str(path),
         "format_version": stored.metadata["version"],
         "kind": model.kind,
-        "network": {"removal": "F", "synthesis": "H"}[model.kind],
+        "network": NETWORK_NAMES[model.kind],
         "topology_fingerprint": model.fingerprint,
         "point_count": model.face.point_count,
         "fps": model.fps,
@@ -535,8 +616,7 @@ def describe_model(path) -> dict:
         "parameters": int(sum(p.numel() for p in model.network.parameters())),
         "bytes_per_frame": frame_bytes(model)["per_frame"] if model.kind in ("removal", "synthesis") else None,
         "training": model.info.get("training"),
+        **({"calibration": model.info["calibration"]} if model.kind == "response" else {}),
         "validation": model.info.get("validation"),
-        "checksum": stored.checksums,
         "warnings": list(model.warnings),
-        "bytes": stored.size,
     }

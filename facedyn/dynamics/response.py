@@ -21,7 +21,8 @@ The first `settle_s` of every take are left out: the expression settles there an
 inertia rings. How hard W is penalized is the session's to say: each of RIDGES is fitted
 without each take in turn and the one that leaves the least of the left-out takes' motion
 is kept (`cross_validated_left`; prototype actors 1801 / 1802 / 1804 took 0.03, 0.03 and
-1.0 where every fit before had 0.1).
+1.0 where every fit before had 0.1). Leaving a take out downdates the normal equations
+(the session's sums less the take's, `_Sums`) instead of refitting on the others.
 
 W is not free: it is fitted in the modal form of a linear tissue, TEMPORAL_KERNELS time
 courses over the skull window shared by every landmark and axis, each with its own map
@@ -36,12 +37,14 @@ of the true dynamics' RMS to 24 / 37 / 66% and walking removal from 53 / 39 / 55
 Tissue stiffens as it moves: a hop rings less than a linear fit on the session's smaller
 motions says. The fit therefore carries one more number, the stiffening beta of a first-order
 correction d + beta K * |d|^2 d (facedyn.dynamics.hardening; K the response's own answer to an
-acceleration impulse), fitted with the response by alternation and recorded as `hardening`;
+acceleration impulse), fitted with the response by alternation on the whole session (a
+take left out keeps the session's beta) and recorded as `hardening`;
 synthesis and removal both apply it. Files fitted before it carry no `hardening` and answer
 linearly, as they did.
 
-The result is a synthesis model like H (the template's samples, landmarks, stretch setup and
-skull input), whose network is one linear layer that reads no stretch: what the response
+The result is a model of its own kind, "response" (file suffix .response), set up like H
+(the template's samples, landmarks, stretch setup and skull input), whose network is one
+linear layer that reads no stretch: what the response
 cannot say is how an expression changes the tissue's answer. With zero skull acceleration
 it predicts zero dynamics. Since it reads the skull alone, it also removes: the capture
 minus the dynamics it predicts from the solved skull (`remove_with_response`, `usdfacedyn
@@ -68,6 +71,7 @@ from facedyn.dynamics.features import check_fps
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import Network, NetworkSpec, resolve_device
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
+from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.spikes import replace_spikes
 from facedyn.dynamics.training import TrainingSequence
 from facedyn.geometry import quaternion
@@ -82,15 +86,16 @@ ALTERNATIONS = 15  # rounds of kernels-then-maps least squares
 
 def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: float = SETTLE_S, ridge: float | None = None,
                         on_candidate: Callable[[], None] | None = None) -> DynamicsModel:
-    """A synthesis model with ``model``'s setup whose network is the takes' linear response.
+    """A response model with ``model``'s setup (a synthesis model or a response) whose network
+    is the takes' linear response.
 
     takes: TrainingSequences (or dicts) of one actor, each holding one expression under
     skull motion (platforms, walks, jumps...), all at the model's frame rate; ridge: the
     penalty (None: the one of RIDGES the session's cross-validation prefers; RIDGE for one
     take); on_candidate: called after each penalty tried (progress).
     """
-    if model.kind != "synthesis":
-        raise ValueError(f"fit_linear_response needs a synthesis model as its template, got a {model.kind!r} model")
+    if model.kind not in ("synthesis", "response"):
+        raise ValueError(f"fit_linear_response needs a synthesis model (or a response) as its template, got a {model.kind!r} model")
     if ridge is not None and not ridge > 0:
         raise ValueError(f"ridge must be positive, got {ridge}")
     session, described = [], []
@@ -100,26 +105,36 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
         described.append({"name": take.name, "frames": int(len(take.points)), "rows": int(len(rows.targets))})
     if not described:
         raise ValueError("a linear response needs at least one take")
-    if ridge is None and len(session) > 1:
-        left_by_ridge = {}
-        for candidate in RIDGES:
-            left_by_ridge[candidate] = cross_validated_left(session, candidate, model)
-            if on_candidate is not None:
-                on_candidate()
-        ridge = min(left_by_ridge, key=left_by_ridge.get)
-    else:
-        ridge = RIDGE if ridge is None else float(ridge)
-        left_by_ridge = {ridge: cross_validated_left(session, ridge, model) if len(session) > 1 else None}
+    sums = _Sums.total(session)
+    candidates = RIDGES if ridge is None and len(session) > 1 else (RIDGE if ridge is None else float(ridge),)
+    left_by_ridge, fits = {}, {}
+    for candidate in candidates:
+        session_fit = _session_fit(session, sums, candidate, model)
+        fits[candidate] = session_fit[:2]  # the fit and its beta: a session's targets are large
+        left_by_ridge[candidate] = _left(session, sums, candidate, session_fit, model) if len(session) > 1 else None
+        if on_candidate is not None and len(candidates) > 1:
+            on_candidate()
+    ridge = min(left_by_ridge, key=lambda r: left_by_ridge[r]) if len(candidates) > 1 else candidates[0]
     left = left_by_ridge[ridge]
-    weights, scale, beta = _fit(session, ridge, model)
+    (weights, scale), beta = fits[ridge][:2]
     network = _linear_network(model.network.spec, weights, scale)
     record = {"response": "linear", "takes": described, "rows": int(sum(len(rows.targets) for rows in session)), "settle_s": float(settle_s),
               "ridge": ridge, "session_cross_validated_left": None if left is None else round(left, 4),
               "ridge_candidates": {f"{r:g}": None if v is None else round(v, 4) for r, v in left_by_ridge.items()},
               "expression_inertia_hz": LOWPASS_HZ, "hardening": beta, "temporal_kernels": TEMPORAL_KERNELS}
     info = {**copy.deepcopy(model.info), "calibration": record, "validation": None}
-    return DynamicsModel(kind="synthesis", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
+    return DynamicsModel(kind="response", network=network, face=model.face, fps=model.fps, windows=dict(model.windows), info=info,
                          arrays=dict(model.arrays), skull_motion=model.skull_input)
+
+
+def response_template(face, fps: float, info: dict | None = None) -> DynamicsModel:
+    """The setup a response is fitted with where the actor has no network H to take it from
+    (`usdfacedyn calibrate`): the face's samples and landmarks (an F's), the landmarks'
+    accelerations over t-30..t+10, no stretch (a response reads none)."""
+    motion = SkullMotionInput()
+    spec = NetworkSpec(len(face.landmarks) * motion.width * 3, (), 3 * len(face.samples))
+    return DynamicsModel(kind="response", network=Network(spec), face=face, fps=float(fps), windows={}, info=dict(info or {}),
+                         skull_motion=motion)
 
 
 def settled_frames(frame_count: int, fps: float, settle_s: float, model: DynamicsModel) -> slice:
@@ -138,14 +153,31 @@ def cross_validated_left(session: list, ridge: float, model: DynamicsModel) -> f
     that stiffens with strain or with the expression). The same fraction of a removal
     model's output (`usdfacedyn evaluate --session`) compares the two on one actor.
     """
-    left = [rows.targets - _predict(rows, fit, model) for rows, fit in zip(session, _fits_without_each(session, ridge, model))]
+    sums = _Sums.total(session)
+    return _left(session, sums, ridge, _session_fit(session, sums, ridge, model), model)
+
+
+def _left(session: list, sums: "_Sums", ridge: float, session_fit: tuple, model: DynamicsModel) -> float:
+    """`cross_validated_left` given the session's sums and fit (`_session_fit`)."""
+    left = [rows.targets - _predict(rows, fit, model) for rows, fit in zip(session, _fits_without_each(session, sums, ridge, session_fit, model))]
     return motion_left_beyond_sag(left, [rows.targets for rows in session], [rows.rotations for rows in session])
 
 
-def _fits_without_each(session: list, ridge: float, model: DynamicsModel):
-    """For each take in turn, `_fit` on all the other takes."""
-    for k in range(len(session)):
-        yield _fit(session[:k] + session[k + 1:], ridge, model)
+def _fits_without_each(session: list, sums: "_Sums", ridge: float, session_fit: tuple, model: DynamicsModel):
+    """For each take in turn, the response fitted on all the other takes: (weights, scale, beta).
+
+    The normal equations are downdated: the session's sums less the take's own
+    (`_Sums`), solved in the modal form as the whole session's are. The stiffening is one
+    number of the face, fitted with the whole session (`_session_fit`): a left-out fit
+    keeps its beta and the targets it leaves (each take's less beta times its load), so
+    leaving a take out costs one solve, not a refit with its alternation over every other
+    take (on a 70-take session, 70 refits per candidate penalty took more than an hour).
+    """
+    _, beta, targets, moments = session_fit
+    for rows, target in zip(session, targets):
+        own = _moments([rows], [target])
+        solve = _solver(sums - _Sums.of(rows), ridge, len(model.face.landmarks), model.skull_input.width)
+        yield (*solve(moments[0] - own[0], moments[1] - own[1]), beta)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -165,17 +197,61 @@ class _TakeRows:
         return b - b.mean(axis=0)
 
 
-def _fit(session: list, ridge: float, model: DynamicsModel) -> tuple[np.ndarray, np.ndarray, float]:
-    """(weights, scale, hardening beta): the response and the tissue's stiffening fitted
-    together on the session (facedyn.dynamics.hardening)."""
-    features = [rows.features for rows in session]
-    rotations = [rows.rotations for rows in session]
-    (weights, scale), beta = fit_hardening(
-        _solver(features, rotations, ridge, len(model.face.landmarks), model.skull_input.width),
-        lambda fit: _centred_loads(session, fit, model),
-        lambda fit: [(b / fit[1]) @ fit[0] for b in features],
-        [rows.targets for rows in session])
-    return weights, scale, beta
+@dataclasses.dataclass(frozen=True)
+class _Sums:
+    """The normal equations' sums over takes' settled rows that do not depend on the targets:
+    the skull features b (each take's less its mean) squared and crossed, with the rotation
+    entries r (the sag). A session's are the sum of its takes', so a take is left out by
+    subtracting its own."""
+
+    rows: int
+    squares: np.ndarray  # (features,) sum of b^2: the features' scale
+    bb: np.ndarray  # (features, features)
+    rb: np.ndarray  # (9, features)
+    rr: np.ndarray  # (9, 9)
+
+    @classmethod
+    def of(cls, rows: _TakeRows) -> "_Sums":
+        b, r = rows.features, rows.rotations
+        return cls(len(b), np.sum(b * b, axis=0), b.T @ b, r.T @ b, r.T @ r)
+
+    @classmethod
+    def total(cls, session: list) -> "_Sums":
+        total = cls.of(session[0])
+        for rows in session[1:]:  # one take's matrices made at a time
+            total = total + cls.of(rows)
+        return total
+
+    def __add__(self, other: "_Sums") -> "_Sums":
+        return _Sums(*(getattr(self, f.name) + getattr(other, f.name) for f in dataclasses.fields(self)))
+
+    def __sub__(self, other: "_Sums") -> "_Sums":
+        return _Sums(*(getattr(self, f.name) - getattr(other, f.name) for f in dataclasses.fields(self)))
+
+
+def _moments(session: list, targets: list) -> tuple[np.ndarray, np.ndarray]:
+    """(b't (features, 3S), r't (9, 3S)): the targets' sums over the takes' settled rows."""
+    bt = sum(rows.features.T @ t for rows, t in zip(session, targets))
+    rt = sum(rows.rotations.T @ t for rows, t in zip(session, targets))
+    return bt, rt
+
+
+def _session_fit(session: list, sums: _Sums, ridge: float, model: DynamicsModel) -> tuple:
+    """((weights, scale), hardening beta, targets, their moments): the response and the tissue's stiffening
+    fitted together on the session by alternation (facedyn.dynamics.hardening): each fitted to
+    what the other leaves, its rounds; targets: each take's that the last solve fitted (its
+    centred skin less beta times its load under the fit before)."""
+    solve = _solver(sums, ridge, len(model.face.landmarks), model.skull_input.width)
+    solved = []
+
+    def solve_for(targets: list) -> tuple:
+        moments = _moments(session, targets)
+        solved[:] = [(targets, moments)]  # the last only: a session's targets are large
+        return solve(*moments)
+
+    fit, beta = fit_hardening(solve_for, lambda fit: _centred_loads(session, fit, model),
+                              lambda fit: [(rows.features / fit[1]) @ fit[0] for rows in session], [rows.targets for rows in session])
+    return (fit, beta, *solved[-1])
 
 
 def _centred_loads(session: list, fit: tuple, model: DynamicsModel) -> list:
@@ -198,26 +274,23 @@ def _predict(rows: _TakeRows, fit: tuple, model: DynamicsModel) -> np.ndarray:
     return (rows.features / scale) @ weights + beta * _centred_loads([rows], fit, model)[0]
 
 
-def _solver(features: list, rotations: list, ridge: float, landmarks: int, width: int) -> Callable[[list], tuple[np.ndarray, np.ndarray]]:
-    """targets -> (response weights on the scaled skull features (features, 3S), the features'
-    scale) in the modal form (`_modal_fit`): ridge on the spatial maps, the shared sag on the
-    rotation entries unpenalized (projected out of the features, which is the same least
-    squares). The features' Gram matrix is computed once: the stiffening's alternation solves
-    again for each round's targets. Every solve here is NumPy's: SciPy's LAPACK calls run on
-    its own OpenBLAS threads, which interleaved with NumPy's fight over the cores (a fit
+def _solver(sums: _Sums, ridge: float, landmarks: int, width: int) -> Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """(b't, r't) moments -> (response weights on the scaled skull features (features, 3S), the
+    features' scale) in the modal form (`_modal_fit`): ridge on the spatial maps, the shared
+    sag on the rotation entries unpenalized (projected out of the normal equations, which is
+    the same least squares). The Gram matrix is formed once: the stiffening's alternation
+    solves again for each round's targets. Every solve here is NumPy's: SciPy's LAPACK calls
+    run on its own OpenBLAS threads, which interleaved with NumPy's fight over the cores (a fit
     several times slower on 2 cores)."""
-    b = np.concatenate(features)
-    scale = np.sqrt(np.mean(b * b, axis=0))
+    scale = np.sqrt(sums.squares / sums.rows)
     scale = np.where(scale > 1e-12, scale, 1.0)
-    basis, _ = np.linalg.qr(np.concatenate(rotations))
-    x = b / scale
-    x -= basis @ (basis.T @ x)
-    gram = x.T @ x
-    penalty = ridge * len(x)
+    sag = np.linalg.pinv(sums.rr, rcond=1e-10, hermitian=True)
+    gram = (sums.bb - sums.rb.T @ sag @ sums.rb) / np.outer(scale, scale)
+    penalty = ridge * sums.rows
     penalized = gram + penalty * np.eye(len(gram))
 
-    def solve(targets: list) -> tuple[np.ndarray, np.ndarray]:
-        moments = x.T @ np.concatenate(targets)
+    def solve(bt: np.ndarray, rt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        moments = (bt - sums.rb.T @ (sag @ rt)) / scale[:, None]
         full = np.linalg.solve(penalized, moments)
         return _modal_fit(gram, moments, full, penalty, landmarks, width), scale
 
@@ -275,7 +348,8 @@ def remove_left_out(model: DynamicsModel, takes: list) -> list[tuple[np.ndarray,
     others, in order: [(quasistatic skull-space points, offsets)], float32.
 
     What the response does to a take it has seen flatters it; refitted without the take (the
-    model's own settle and ridge), it removes as it would from a new capture, so its
+    model's own settle and ridge, its normal equations downdated, the session's stiffening
+    kept: `_fits_without_each`), it removes as it would from a new capture, so its
     figures on its session compare with a removal model's (`usdfacedyn evaluate --session
     --removal RESPONSE`). takes: TrainingSequences, exactly the model's calibration takes.
     """
@@ -290,8 +364,10 @@ def remove_left_out(model: DynamicsModel, takes: list) -> list[tuple[np.ndarray,
         raise ValueError("a response fitted on one take has no other take to be refitted on")
     record = model.info["calibration"]
     session = [_take_rows(take, model, record["settle_s"]) for take in takes]
+    sums = _Sums.total(session)
+    fits = _fits_without_each(session, sums, record["ridge"], _session_fit(session, sums, record["ridge"], model), model)
     removed = []
-    for take, (weights, scale, beta) in zip(takes, _fits_without_each(session, record["ridge"], model)):
+    for take, (weights, scale, beta) in zip(takes, fits):
         info = {**model.info, "calibration": {**record, "hardening": beta}} if "hardening" in record else model.info
         refitted = dataclasses.replace(model, network=_linear_network(model.network.spec, weights, scale), info=info)
         removed.append(remove_with_response(take.points, take.translate, take.orient, take.fps, refitted, space=take.space, device="cpu"))
@@ -299,8 +375,9 @@ def remove_left_out(model: DynamicsModel, takes: list) -> list[tuple[np.ndarray,
 
 
 def is_linear_response(model: DynamicsModel) -> bool:
-    """Whether a model is an actor's linear response (reads the skull alone)."""
-    return model.kind == "synthesis" and model.info.get("calibration", {}).get("response") == "linear"
+    """Whether a model is an actor's linear response (reads the skull alone): its kind says
+    (files written before the kind existed load as one, facedyn.dynamics.modelfile)."""
+    return model.kind == "response"
 
 
 def remove_with_response(points, translate, orient, fps: float, model: DynamicsModel, *, space: str = "skull",

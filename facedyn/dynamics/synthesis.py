@@ -195,8 +195,8 @@ def synthesize_dynamics(
     kernel's ``'auto' | 'opencl' | 'numpy'``; device: torch device for H. Frames go
     through in blocks of ``chunk_frames`` (memory only: every step is batched over frames).
     """
-    if model.kind != "synthesis":
-        raise ValueError(f"synthesize_dynamics needs a synthesis model, got a {model.kind!r} model")
+    if model.kind not in ("synthesis", "response"):
+        raise ValueError(f"synthesize_dynamics needs a synthesis model or a linear response, got a {model.kind!r} model")
     y = check_points(quasistatic, "quasistatic")
     f, n = y.shape[:2]
     if n != model.face.point_count:
@@ -205,18 +205,18 @@ def synthesize_dynamics(
         raise ValueError(f"chunk_frames must be a positive whole number, got {chunk_frames}")
     model.check_compatible(fps=check_fps(fps))
     t, q = check_transforms(translate, orient, f)
-    nb, lengths = model_stretch(model)
     y = np.ascontiguousarray(y, dtype=np.float32)
     # a linear response reads no stretch, and its stiffening and expression term read neighbouring frames
     response = None
     if is_linear_response(model):
         b = model.skull_input.features(t, q, model.face.landmarks, fps)
         response = synthesized_dynamics(model, b, y[:, model.face.samples], fps, device)
+    nb, lengths = model_stretch(model) if response is None else (None, None)
     shape = expression_shape(y, model.windows.get("stretch_smoothing", 0)) if response is None else None
     propagator = model.propagator()
     network = model.network.to(resolve_device(device)).eval()
     dev = next(network.parameters()).device
-    samples = nb.sample_count
+    samples = len(model.face.samples)
     offsets = np.empty((f, n, 3), np.float32)
     points = np.empty((f, n, 3), np.float32)
     step = affordable_frames(model, int(chunk_frames))

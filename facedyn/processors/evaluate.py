@@ -13,8 +13,8 @@ each holding one expression: the fraction of their motion beyond the held shapes
 sag that follows the head that the removal leaves (the number `train-synthesis --response
 linear` records for the actor's linear response, by leaving each take out). With `--removal MODEL`, the takes are read as `remove` reads them
 (stabilized) and that model's removal is evaluated, in memory: candidate models compare on
-one session without attaching (or writing) any layer. MODEL may be a removal model (F) or
-an actor's linear response; given the response's own calibration takes, each is removed by
+one session without attaching (or writing) any layer. MODEL may be a removal model (F), an
+actor's linear response or a blend file (whose members' removals are averaged); given the response's own calibration takes, each is removed by
 the response refitted without it (facedyn.dynamics.response.remove_left_out), so its
 figures are those of a new capture. `--blend MODEL` evaluates the mean of the two models'
 removals, as `remove --blend` makes it.
@@ -29,7 +29,7 @@ import numpy as np
 
 from facedyn.errors import UsageError
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.remove import check_skull_frame, mean_removal, removal_of
+from facedyn.processors.remove import check_skull_frame, mean_removal, removal_models, removal_of
 from facedyn.progress import Progress
 
 QUASISTATIC_BELOW = "synthesized"  # evaluate reads what remove wrote: everything below the synthesized role
@@ -51,8 +51,9 @@ class EvaluateProcessor(Processor):
                   minimum=0.0, maximum=60.0, metavar="S"),
         Parameter("frequency", float, None, "the frequency (Hz) whose residual to report (default: the skull motion's peak)",
                   above=0.0, maximum=1000.0, metavar="HZ"),
-        Parameter("synthesis", Path, None, "a synthesis model: also re-synthesize each take under its own motion", metavar="MODEL"),
-        Parameter("removal", Path, None, "evaluate this removal model (F, or an actor's linear response) on the stabilized takes "
+        Parameter("synthesis", Path, None, "a synthesis model (H or a linear response): also re-synthesize each take under its own "
+                  "motion", metavar="MODEL"),
+        Parameter("removal", Path, None, "evaluate this removal model (F, an actor's linear response or a blend) on the stabilized takes "
                   "instead of the removal they carry (nothing is written to them)", metavar="MODEL"),
         Parameter("blend", Path, None, "with --removal: evaluate the mean of its removal and this model's (as remove --blend)",
                   metavar="MODEL"),
@@ -73,10 +74,12 @@ class EvaluateProcessor(Processor):
         for path in request.inputs:
             check_length(path, reads, request.frames)
             perf, _ = read_take_below(path, reads, frames=request.frames)
-            if params["removal"] is not None:
-                removals = removals or [removal_model(params[flag], perf, flag) for flag in ("removal", "blend") if params[flag] is not None]
-                for flag, model in zip(("removal", "blend"), removals):
-                    check_skull_frame(path, perf, params[flag], model)
+            if params["removal"] is not None and not removals:
+                removals = [(params[flag], model) for flag in ("removal", "blend") if params[flag] is not None
+                            for model in removal_models(params[flag], flag, perf, perf.fps, path)]
+            elif params["removal"] is not None:
+                for model_path, model in removals:
+                    check_skull_frame(path, perf, model_path, model)
             elif perf.offsets is None:
                 raise TakeError(f"{path}: no removed offsets (primvars:facedyn:dynamicsOffset); run `usdfacedyn remove` first")
             if perf.frame_count < 8:
@@ -86,8 +89,9 @@ class EvaluateProcessor(Processor):
             takes.append((Path(path), perf))
         if params["held_expression"] and len(takes) < 2:
             raise UsageError("--held-expression compares takes: give at least two")
-        for flag, model in zip(("removal", "blend"), removals):
-            check_response_takes(params[flag], model, takes)
+        for model_path, model in removals:
+            check_response_takes(model_path, model, takes)
+        removals = [model for _, model in removals]
         synthesis = None if params["synthesis"] is None else fitting_model(params["synthesis"], takes[0][1], "synthesis")
         description = {"takes": [str(p) for p, _ in takes], "frames": [p.frame_count for _, p in takes],
                        "held_expression": params["held_expression"], "session": params["session"], "synthesis": str(params["synthesis"] or ""),
@@ -125,24 +129,13 @@ class EvaluateProcessor(Processor):
 
 
 def fitting_model(path: Path, perf, kind: str):
-    """The --removal or --synthesis model, checked to fit the takes (topology, frame rate) and to be of `kind`."""
+    """The --synthesis model, checked to fit the takes (topology, frame rate) and to synthesize."""
     from facedyn.dynamics.modelfile import load_model
+    from facedyn.processors.synthesize import SYNTHESIZES
 
     model = load_model(path, topology=perf.topology, fps=perf.fps)
-    if model.kind != kind:
-        raise UsageError(f"--{kind} {path}: a {model.kind} model; this needs a {kind} model")
-    return model
-
-
-def removal_model(path: Path, perf, flag: str):
-    """The --removal or --blend model: a removal model (F) or an actor's linear response that fits the takes."""
-    from facedyn.dynamics.modelfile import load_model
-    from facedyn.dynamics.response import is_linear_response
-
-    model = load_model(path, topology=perf.topology, fps=perf.fps)
-    if model.kind != "removal" and not is_linear_response(model):
-        raise UsageError(f"--{flag} {path}: a synthesis model (network H); this needs a removal model (F) or an actor's linear "
-                         "response (train-synthesis --response linear)")
+    if model.kind not in SYNTHESIZES:
+        raise UsageError(f"--{kind} {path}: a {model.kind} model; this needs a synthesis model (H) or a linear response")
     return model
 
 

@@ -1,10 +1,12 @@
 """The remove processor: subtract the secondary dynamics that network F predicts.
 
-Or that an actor's linear response predicts from the skull alone (`train-synthesis
---response linear`, facedyn.dynamics.response): `--model` takes either. `--blend MODEL`
-removes the mean of two models' dynamics (e.g. F's and the actor's response, whose errors
-are partly independent); `usdfacedyn evaluate --session --removal M --blend N` scores the
-mean on the actor's session before a take is touched.
+Or that an actor's linear response predicts from the skull alone (a .response file from
+`train-synthesis --response linear`, facedyn.dynamics.response): `--model` takes either, or
+a blend file (`usdfacedyn calibrate`'s `removal.blend`), which removes the mean of its
+members' dynamics, as `--blend MODEL` does for two files (F's and the actor's response,
+whose errors are partly independent); `usdfacedyn evaluate --session --removal M --blend N`
+scores the mean on the actor's session before a take is touched. A synthesis network H is
+never a removal.
 
 Reads the stabilized take (the layers below the quasistatic role) and writes the
 quasistatic layer: points = the quasistatic skin in skull space, and the removed dynamics
@@ -27,6 +29,7 @@ from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Rea
 from facedyn.progress import Progress
 
 CHUNK_FRAMES = 1024  # frames computed, held and written (one value clip of a long take) at a time
+REMOVES = ("removal", "response")  # the model kinds that remove: network F, an actor's linear response
 
 
 class RemoveProcessor(Processor):
@@ -36,8 +39,8 @@ class RemoveProcessor(Processor):
     reads = Reads("take", help="the take root (reads the stabilized take below any quasistatic layer)")
     writes = Writes("layer", role="quasistatic", help="the quasistatic layer to write (.usdc)")
     parameters = (
-        Parameter("model", Path, help="the removal model file (from train-removal), or an actor's linear response "
-                  "(train-synthesis --response linear)", metavar="MODEL"),
+        Parameter("model", Path, help="the removal model file (from train-removal), an actor's linear response "
+                  "(.response, train-synthesis --response linear) or a blend of them (calibrate's removal.blend)", metavar="MODEL"),
         Parameter("blend", Path, None, "a second removal model or linear response: remove the mean of the two models' dynamics",
                   metavar="MODEL"),
         Parameter("backend", str, "auto", "feature and Laplacian kernels", BACKENDS),
@@ -45,19 +48,13 @@ class RemoveProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.dynamics.modelfile import load_model
-
         params = request.params
-        reader, model = reader_with_model(request, self.writes.role, "removal", "synthesis")
-        check_removes(model, "model", params["model"])
-        models = [model]
+        reader = take_reader(request, self.writes.role)
+        models = removal_models(params["model"], "model", reader.head, reader.fps, request.inputs[0])
         if params["blend"] is not None:
-            blend = load_model(params["blend"], topology=reader.head.topology, fps=reader.fps)
-            check_removes(blend, "blend", params["blend"])
-            check_skull_frame(request.inputs[0], reader.head, params["blend"], blend)
-            models.append(blend)
+            models += removal_models(params["blend"], "blend", reader.head, reader.fps, request.inputs[0])
         description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "model": str(params["model"]),
-                       "blend": str(params["blend"] or ""), "samples": int(len(model.face.samples))}
+                       "blend": str(params["blend"] or ""), "samples": int(len(models[0].face.samples))}
         return Plan(description, (reader, models, params))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
@@ -86,13 +83,25 @@ class RemoveProcessor(Processor):
                            summary=stats.summary, chunks=chunks())
 
 
-def check_removes(model, flag: str, path: Path) -> None:
-    """remove takes a removal model (F) or an actor's linear response, not a synthesis network."""
-    from facedyn.dynamics.response import is_linear_response
+def take_reader(request: Request, role_name: str):
+    """The take below `role_name`, as a chunked reader (facedyn.usd.frames)."""
+    from facedyn.usd.frames import TakeFrames
 
-    if model.kind == "synthesis" and not is_linear_response(model):
-        raise UsageError(f"--{flag} {path}: a synthesis model (network H), which reads the quasistatic shape it would "
-                         "make; remove needs a removal model (F) or an actor's linear response (train-synthesis --response linear)")
+    return TakeFrames(single_input(request), role_name, frames=request.frames)
+
+
+def removal_models(path: Path, flag: str, perf, fps: float, take: Path) -> list:
+    """The models a removal file holds (one, or a blend's members) that fit the take: removal
+    models (F) and linear responses, never a synthesis network."""
+    from facedyn.dynamics.modelfile import load_models
+
+    models = load_models(path, topology=perf.topology, fps=fps)
+    for model in models:
+        if model.kind not in REMOVES:
+            raise UsageError(f"--{flag} {path}: a synthesis model (network H), which reads the quasistatic shape it would "
+                             "make; this needs a removal model (F), an actor's linear response (.response) or a blend of them")
+        check_skull_frame(take, perf, path, model)
+    return models
 
 
 def removal_of(points, translate, orient, fps: float, model, backend: str = "auto", device: str = "auto") -> tuple[np.ndarray, np.ndarray]:
@@ -116,14 +125,12 @@ def mean_removal(removed: list) -> tuple[np.ndarray, np.ndarray]:
 def reader_with_model(request: Request, role_name: str, *kinds: str):
     """The take below `role_name` (a chunked reader, facedyn.usd.frames) and a model of one of `kinds` that fits it."""
     from facedyn.dynamics.modelfile import load_model
-    from facedyn.usd.frames import TakeFrames
 
-    path = single_input(request)
-    reader = TakeFrames(path, role_name, frames=request.frames)
+    reader = take_reader(request, role_name)
     model = load_model(request.params["model"], topology=reader.head.topology, fps=reader.fps)
     if model.kind not in kinds:
         raise UsageError(f"--model {request.params['model']}: a {model.kind} model; this step needs a {' or '.join(kinds)} model")
-    check_skull_frame(path, reader.head, request.params["model"], model)
+    check_skull_frame(request.inputs[0], reader.head, request.params["model"], model)
     return reader, model
 
 

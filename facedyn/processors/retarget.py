@@ -15,7 +15,7 @@ import numpy as np
 from facedyn.errors import UsageError
 from facedyn.performance import BACKENDS
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device, single_input
-from facedyn.processors.synthesize import synthesized_chunk, synthesized_layer
+from facedyn.processors.synthesize import SYNTHESIZES, synthesized_chunk, synthesized_layer
 from facedyn.progress import Progress
 
 
@@ -27,7 +27,7 @@ class RetargetProcessor(Processor):
     writes = Writes("layer", role="retargeted", help="the retargeted layer to write (.usdc)")
     parameters = (
         Parameter("source", Path, help="actor A's take: stabilized (synthesis) or with dynamics offsets (delta-transfer)", metavar="TAKE"),
-        Parameter("model", Path, None, "actor B's synthesis model (method synthesis)", metavar="MODEL"),
+        Parameter("model", Path, None, "actor B's synthesis model: network H or its linear response (method synthesis)", metavar="MODEL"),
         Parameter("method", str, "synthesis", "synthesis (B's network H) or delta-transfer (copy A's offsets)", ("synthesis", "delta-transfer")),
         Parameter("backend", str, "auto", "stretch kernels", BACKENDS),
         Parameter("device", str, "auto", "torch device for the network: auto, cpu, cuda, cuda:N", check=check_device),
@@ -42,7 +42,7 @@ class RetargetProcessor(Processor):
         if params["method"] == "synthesis":
             if params["model"] is None:
                 raise UsageError("--model is required with --method synthesis (actor B's synthesis model)")
-            reader, model = reader_with_model(request, self.writes.role, "synthesis")
+            reader, model = reader_with_model(request, self.writes.role, *SYNTHESIZES)
         else:
             if params["model"] is not None:
                 raise UsageError("--model: delta-transfer uses no model; leave it out")

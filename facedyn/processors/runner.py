@@ -43,7 +43,7 @@ def execute(processor: Processor, request: Request, progress: Progress, dry_run:
         report["dry_run"] = True
         return report
     writes = processor.writes.what
-    created_folder = writes == "folder" and not request.output.exists()
+    created_folder = writes == "folder" and not processor.writes.resumable and not request.output.exists()
     made = _make_folders(request.output.parent)
     try:
         output = processor.run(plan, progress)

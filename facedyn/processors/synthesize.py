@@ -17,6 +17,7 @@ from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames,
 from facedyn.progress import Progress
 
 
+SYNTHESIZES = ("synthesis", "response")  # the model kinds that synthesize: network H, an actor's linear response
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 BVH_PARAMETERS = (
     Parameter("bvh_units", float, None, "cm per BVH unit (default: from the skeleton's height; CMU files 5.64)",
@@ -34,7 +35,8 @@ class SynthesizeProcessor(Processor):
     reads = Reads("take", help="the take root (reads the quasistatic take below any synthesized layer)")
     writes = Writes("layer", role="synthesized", help="the synthesized layer to write (e.g. synthesized.hop.usdc)")
     parameters = (
-        Parameter("model", Path, help="the synthesis model file (from train-synthesis)", metavar="MODEL"),
+        Parameter("model", Path, help="the synthesis model file (network H, or an actor's linear response .response; "
+                  "from train-synthesis)", metavar="MODEL"),
         Parameter("skull_motion", str, "", "BVH file, a stabilized take, or walk|run|hop|still|platform:HZ[:side|up|forward] (default: the take's own)"),
         Parameter("joint", str, "Head", "BVH joint that carries the skull"),
         *BVH_PARAMETERS,
@@ -46,7 +48,7 @@ class SynthesizeProcessor(Processor):
     def prepare(self, request: Request) -> Plan:
         from facedyn.processors.motion_source import skull_motion
 
-        reader, model = reader_with_model(request, self.writes.role, "synthesis")
+        reader, model = reader_with_model(request, self.writes.role, *SYNTHESIZES)
         params = request.params
         if params["skull_motion"]:
             translate, orient, described = skull_motion(params["skull_motion"], reader.fps, reader.frame_count, params["joint"],

@@ -13,7 +13,9 @@ tissue answers the skull in its own way, which a family's average does not
 (facedyn.dynamics.synthesis.calibrate_synthesis). `--calibrate MODEL --response linear`
 fits the actor's linear response to the skull by least squares instead, on takes that each
 hold one expression, with neither F nor truth (facedyn.dynamics.response says how); it
-keeps the model's setup and replaces its network.
+keeps the model's setup (an H's, or another response's) and writes a model of kind
+"response" (name it .response): synthesize and retarget take it as they take H, remove
+takes it as it takes F.
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ class TrainSynthesisProcessor(Processor):
     version = "1"
     summary = "train the synthesis network H on a corpus and write a model file"
     reads = Reads("takes", metavar="CORPUS", help="corpus folders (corpus.json), take folders or stabilized takes")
-    writes = Writes("file", metavar="MODEL", help="the model file to write (e.g. actor.synthesis)")
+    writes = Writes("file", metavar="MODEL", help="the model file to write (e.g. actor.synthesis; actor.response with --response linear)")
     parameters = (
         Parameter("quasistatic", str, None, "a removal model (the paper's way) or 'truth' (a simulated corpus's true shapes); "
                   "not with --response linear", metavar="MODEL|truth"),
@@ -79,8 +81,8 @@ class TrainSynthesisProcessor(Processor):
                 raise TakeError(f"{params['quasistatic']}: the removal model was trained in another skull frame than these takes'; "
                                 "train F and H on takes of one actor")
             face = quasistatic.face  # H uses F's samples and landmarks
-        calibrated = None if params["calibrate"] is None else calibration_model(params["calibrate"], first, frame)
         linear = params["response"] == "linear"
+        calibrated = None if params["calibrate"] is None else calibration_model(params["calibrate"], first, frame, linear)
         if linear:
             check_session_lengths(takes, calibrated, params["settle"])
         description = {"takes": len(takes), "frames": sum(p.frame_count for _, p in takes), "response": params["response"],
@@ -161,14 +163,16 @@ def epochs_of(params: dict, calibrated) -> int:
     return params["epochs"] or (EPOCHS if calibrated is None else CALIBRATION_EPOCHS)
 
 
-def calibration_model(path: Path, first, frame: dict):
-    """The synthesis model to calibrate, checked against the takes: topology, frame rate and skull frame."""
+def calibration_model(path: Path, first, frame: dict, linear: bool = False):
+    """The synthesis model to calibrate (for a linear response, also a response: its setup is
+    the same), checked against the takes: topology, frame rate and skull frame."""
     from facedyn.dynamics.modelfile import load_model
     from facedyn.usd.errors import TakeError
 
     model = load_model(path, topology=first.topology, fps=first.fps)
-    if model.kind != "synthesis":
-        raise TakeError(f"{path}: a {model.kind} model; --calibrate needs a synthesis model")
+    if model.kind not in (("synthesis", "response") if linear else ("synthesis",)):
+        raise TakeError(f"{path}: a {model.kind} model; --calibrate needs a synthesis model (network H)"
+                        f"{' or a linear response' if linear else ''}")
     if model.info.get("skull_frame") not in (None, frame["skull_frame"]):
         raise TakeError(f"{path}: the synthesis model was trained in another skull frame than these takes'; stabilize the "
                         "calibration takes with the --actor the model was trained for")

@@ -1,6 +1,7 @@
 """An actor's linear response fitted on held expressions without truth (facedyn.dynamics.response)."""
 import numpy as np
 import pytest
+import torch
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import DynamicsModel, load_model, save_model
@@ -304,3 +305,77 @@ def test_the_modal_form_recovers_a_response_of_that_form_and_its_kernel_count():
     by_lag = np.moveaxis(fitted.reshape(landmarks, width, 3, outputs), 1, 0).reshape(width, -1)
     singular = np.linalg.svd(by_lag, compute_uv=False)
     assert singular[TEMPORAL_KERNELS] < 1e-9 * singular[0] < singular[TEMPORAL_KERNELS - 1]
+
+
+def test_the_response_is_its_own_kind_and_old_synthesis_files_load_as_one(template, response, tmp_path):
+    """A response is kind "response" (`is_linear_response` reads the kind); a file written when
+    responses were synthesis models calibrated `response: linear` loads as a response, and H
+    stays H."""
+    import dataclasses
+
+    from facedyn.dynamics.modelfile import describe_model
+    from facedyn.dynamics.response import is_linear_response
+
+    assert response.kind == "response" and is_linear_response(response) and not is_linear_response(template)
+    old = tmp_path / "actor.synthesis"
+    save_model(dataclasses.replace(response, kind="synthesis"), old)
+    loaded = load_model(old)
+    assert loaded.kind == "response" and is_linear_response(loaded)
+    assert load_model(save_model(template, tmp_path / "h.synthesis")).kind == "synthesis"
+    described = describe_model(old)
+    assert described["network"] == "linear response (actor's)" and described["calibration"]["ridge"] == response.info["calibration"]["ridge"]
+
+
+def test_a_blend_holds_its_members_whole_in_one_checked_file(template, response, tmp_path):
+    """save_blend writes the members (removal models, responses) into one file: load_models
+    gives them back as saved, load_model refuses it (only removal reads a blend), a network H
+    is no member, and a changed byte is caught by the file's checksums."""
+    from facedyn.dynamics.modelfile import ModelFileError, describe_model, load_models, save_blend
+
+    path = save_blend([response, response], tmp_path / "removal.blend")
+    members = load_models(path, topology=response.fingerprint, fps=FPS)
+    assert [m.kind for m in members] == ["response", "response"]
+    for member in members:
+        for ours, theirs in zip(member.network.state_dict().values(), response.network.state_dict().values()):
+            assert torch.equal(ours, theirs)
+        assert member.info["calibration"] == response.info["calibration"]
+    assert [m.kind for m in load_models(save_model(response, tmp_path / "one.response"))] == ["response"]
+    with pytest.raises(ModelFileError, match="a blend of 2 removal models"):
+        load_model(path)
+    assert describe_model(path)["kind"] == "blend" and len(describe_model(path)["members"]) == 2
+    with pytest.raises(ValueError, match="a blend holds two or more removal models or linear responses"):
+        save_blend([response, template], tmp_path / "bad.blend")
+    damaged = bytearray(path.read_bytes())
+    damaged[-5] ^= 0xFF
+    (tmp_path / "damaged.blend").write_bytes(bytes(damaged))
+    with pytest.raises(ModelFileError, match="checksum"):
+        load_models(tmp_path / "damaged.blend")
+
+
+def test_leaving_a_take_out_downdates_the_normal_equations_to_the_refit(session, template):
+    """Each left-out fit is the session's normal equations less the take's own: the same
+    weights, to rounding, as summing the other takes' afresh and solving (the session's
+    stiffening and the targets it leaves kept), and so the same left-out figure."""
+    from facedyn.dynamics import response as r
+    from facedyn.dynamics.diagnostics import motion_left_beyond_sag
+
+    rows = [r._take_rows(as_take(s), template, r.SETTLE_S) for s in session]
+    sums = r._Sums.total(rows)
+    fit = r._session_fit(rows, sums, 0.1, template)
+    downdated = list(r._fits_without_each(rows, sums, 0.1, fit, template))
+    targets = fit[2]
+    refits = []
+    for k in range(len(rows)):
+        others = [x for j, x in enumerate(rows) if j != k]
+        solve = r._solver(r._Sums.total(others), 0.1, len(template.face.landmarks), template.skull_input.width)
+        refits.append((*solve(*r._moments(others, [t for j, t in enumerate(targets) if j != k])), fit[1]))
+    for (w, scale, beta), (w_ref, scale_ref, beta_ref) in zip(downdated, refits):
+        np.testing.assert_allclose(scale, scale_ref, rtol=1e-10)
+        # the modal form's alternations carry the sums' rounding along: a few parts in 1e9 of the largest weight
+        np.testing.assert_allclose(w, w_ref, rtol=1e-6, atol=1e-7 * np.abs(w_ref).max())
+        assert beta == beta_ref
+    whole = [x.targets for x in rows]
+    figures = [motion_left_beyond_sag([x.targets - r._predict(x, f, template) for x, f in zip(rows, fits)], whole, [x.rotations for x in rows])
+               for fits in (downdated, refits)]
+    assert figures[0] == pytest.approx(figures[1], rel=1e-7)
+    assert r.cross_validated_left(rows, 0.1, template) == pytest.approx(figures[0], rel=1e-12)

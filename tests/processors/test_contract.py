@@ -106,7 +106,8 @@ def test_help_marks_required_and_prints_each_default_once(capsys):
     with pytest.raises(SystemExit):
         main(["remove", "--help"])
     flat = " ".join(capsys.readouterr().out.split())
-    assert "--model MODEL the removal model file (from train-removal), or an actor's linear response (train-synthesis --response linear) (required)" in flat
+    assert ("--model MODEL the removal model file (from train-removal), an actor's linear response (.response, train-synthesis "
+            "--response linear) or a blend of them (calibrate's removal.blend) (required)") in flat
     with pytest.raises(SystemExit):
         main(["train-synthesis", "--help"])
     out = capsys.readouterr().out

@@ -200,7 +200,7 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
 
     folder, models = corpus
     session = [folder / name for name in ("smile_walk", "smile_hop", "jaw_open_platform7", "jaw_open_platform10")]
-    response = tmp_path / "actor.synthesis"
+    response = tmp_path / "actor.response"
     assert cli("train-synthesis", *session, "-o", response, "--calibrate", models / "h.synthesis", "--response", "linear",
                "--skull", "truth", "--settle", "0.3") == 0
     report = json.loads(capsys.readouterr().out)
@@ -208,18 +208,19 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     assert report["summary"]["hardening"] == 0.0  # springs that stiffen with the expression only: no stiffening with motion
     chosen = report["summary"]["ridge"]
     family, fitted = load_model(models / "h.synthesis"), load_model(response)
+    assert fitted.kind == "response" and family.kind == "synthesis"
     candidates = fitted.info["calibration"]["ridge_candidates"]
     assert set(candidates) == {"0.01", "0.03", "0.1", "0.3", "1"} and candidates[f"{chosen:g}"] == min(candidates.values())
     for name in ("given", "again"):  # --ridge: the chosen penalty given fits the same response without choosing
-        assert cli("train-synthesis", *session, "-o", tmp_path / f"{name}.synthesis", "--calibrate", models / "h.synthesis", "--response",
+        assert cli("train-synthesis", *session, "-o", tmp_path / f"{name}.response", "--calibrate", models / "h.synthesis", "--response",
                    "linear", "--skull", "truth", "--settle", "0.3", "--ridge", str(chosen)) == 0
-    assert (tmp_path / "again.synthesis").read_bytes() == (tmp_path / "given.synthesis").read_bytes()  # same inputs, same bytes
-    given = load_model(tmp_path / "given.synthesis")
+    assert (tmp_path / "again.response").read_bytes() == (tmp_path / "given.response").read_bytes()  # same inputs, same bytes
+    given = load_model(tmp_path / "given.response")
     assert given.info["calibration"]["ridge_candidates"] == {f"{chosen:g}": candidates[f"{chosen:g}"]}
     for ours, theirs in zip(given.network.state_dict().values(), fitted.network.state_dict().values()):
         assert torch.equal(ours, theirs)
     for name in ("given", "again"):
-        (tmp_path / f"{name}.synthesis").unlink()
+        (tmp_path / f"{name}.response").unlink()
     capsys.readouterr()
     assert np.array_equal(fitted.face.samples, family.face.samples) and fitted.skull_input == family.skull_input
     assert fitted.info["calibration"]["settle_s"] == 0.3 and fitted.info["training"] == family.info["training"]
@@ -240,7 +241,7 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     import facedyn.processors.remove as remove
     import facedyn.processors.synthesize as synthesize
 
-    stiff = tmp_path / "stiff.synthesis"  # the same response on tissue that stiffens with motion
+    stiff = tmp_path / "stiff.response"  # the same response on tissue that stiffens with motion
     fitted.info["calibration"]["hardening"] = 2000.0
     del fitted.info["calibration"]["expression_inertia_hz"]  # whose longer reach would hide the stiffening's
     save_model(fitted, stiff)
@@ -296,17 +297,17 @@ def test_a_linear_response_is_scored_left_out_on_its_session_and_blends_with_f(c
         assert cli("stabilize", root, "-o", root.parent / "stabilized.usdc", "--attach", root) == 0
         roots.append(root)
     fit = ("--calibrate", models / "h.synthesis", "--response", "linear", "--settle", "0.3", "--ridge", "0.1")  # one penalty: left out as by hand
-    response = tmp_path / "actor.synthesis"
+    response = tmp_path / "actor.response"
     assert cli("train-synthesis", *roots, "-o", response, *fit) == 0
     assert cli("evaluate", *roots, "--session", "true", "--removal", response, "-o", tmp_path / "left_out") == 0
     assert cli("evaluate", *roots, "--session", "true", "--removal", models / "f.removal", "--blend", response, "-o", tmp_path / "blend") == 0
     for k, root in enumerate(roots):  # by hand: fitted on the other takes (before any is removed), removed from this one
-        assert cli("train-synthesis", *(r for r in roots if r != root), "-o", tmp_path / f"without_{k}.synthesis", *fit) == 0
+        assert cli("train-synthesis", *(r for r in roots if r != root), "-o", tmp_path / f"without_{k}.response", *fit) == 0
     for k, root in enumerate(roots):
-        assert cli("remove", root, "-o", root.parent / "quasistatic.usdc", "--attach", root, "--model", tmp_path / f"without_{k}.synthesis") == 0
+        assert cli("remove", root, "-o", root.parent / "quasistatic.usdc", "--attach", root, "--model", tmp_path / f"without_{k}.response") == 0
     assert cli("evaluate", *roots, "--session", "true", "-o", tmp_path / "by_hand") == 0
-    assert cli("train-synthesis", *roots, "-o", tmp_path / "refit.synthesis", *fit) == 0  # training reads below the removal now attached
-    assert (tmp_path / "refit.synthesis").read_bytes() == response.read_bytes()
+    assert cli("train-synthesis", *roots, "-o", tmp_path / "refit.response", *fit) == 0  # training reads below the removal now attached
+    assert (tmp_path / "refit.response").read_bytes() == response.read_bytes()
     left_out, blend, by_hand = (json.loads((tmp_path / d / "report.json").read_text())["session"]["motion_left_beyond_sag"]
                                 for d in ("left_out", "blend", "by_hand"))
     # four 2 s takes of which each left out is new in its motion (a hop, a walk, two platforms): the
@@ -474,5 +475,5 @@ def test_evaluate_compares_a_removal_model_on_stabilized_takes_without_touching_
         assert {k: v for k, v in a.items() if k != "take"} == pytest.approx({k: v for k, v in b.items() if k != "take"}, rel=1e-3, abs=1e-4)
     capsys.readouterr()
     assert cli("evaluate", *roots, "--removal", models / "h.synthesis", "-o", tmp_path / "wrong") == 2
-    assert "a synthesis model (network H); this needs a removal model (F) or an actor's linear response" in capsys.readouterr().err
+    assert "a synthesis model (network H), which reads the quasistatic shape it would make; this needs a removal model (F)" in capsys.readouterr().err
     assert not (tmp_path / "wrong").exists()

@@ -1,0 +1,86 @@
+"""`usdfacedyn calibrate` end to end at a tiny scale: a rig, its actor and a session of held
+expressions in; the family's F, the actor's response and the chosen removal out, resumable."""
+import json
+
+import pytest
+import torch
+
+from facedyn.cli import main
+from facedyn.sim.corpus import TakeSpec
+from facedyn.sim.default_face import default_face
+from facedyn.sim.tissue import TissueParams
+from facedyn.usd.corpus import build_corpus
+from facedyn.usd.rig import write_blendshape_rig
+
+SESSION = [("smile", "platform:6"), ("smile", "walk"), ("jaw_open", "platform:9"), ("jaw_open", "hop")]
+TISSUE = TissueParams(soft_hz=6.5, damping_ratio=0.15)  # the actor's own, not the corpus's family
+
+
+def cli(*argv):
+    return main([str(a) for a in argv] + ["-q"])
+
+
+@pytest.fixture(scope="module")
+def actor_session(tmp_path_factory):
+    """(rig file, stabilized session take roots): the session captured and stabilized with the rig's actor."""
+    torch.set_num_threads(1)
+    folder = tmp_path_factory.mktemp("actor")
+    rig = default_face(8)
+    rig_path = write_blendshape_rig(rig, folder / "rig.usda")
+    assert cli("actor", rig_path, "-o", folder / "actor.usda") == 0
+    specs = [TakeSpec(f"{e}_{m.replace(':', '')}", m, e, duration_s=2.0, seed=50 + i, tissue=TISSUE, noise_cm=0.002)
+             for i, (e, m) in enumerate(SESSION)]
+    build_corpus(folder / "session", rig, specs)
+    roots = []
+    for spec in specs:
+        root = folder / "session" / spec.name / "take.usda"
+        assert cli("stabilize", root, "-o", root.parent / "stabilized.usdc", "--attach", root, "--actor", folder / "actor.usda") == 0
+        roots.append(root)
+    return rig_path, roots
+
+
+@pytest.mark.slow
+def test_calibrate_chooses_the_least_leaving_removal_and_resumes(actor_session, tmp_path, capsys):
+    rig, roots = actor_session
+    out = tmp_path / "actor_models"
+    flags = ("--rig", rig, "--corpus-scale", "demo", "--corpus-only", "*_platform[79]hz", "--epochs", "2", "--jobs", "1",
+             "--settle", "0.3")
+    assert cli("calibrate", *roots, "-o", out, *flags) == 0
+    record = json.loads((out / "calibration.json").read_text())
+    figures = {name: c["session_motion_left"] for name, c in record["candidates"].items()}
+    assert set(figures) == {"family", "response", "mean"} and all(0 < v < 10 for v in figures.values())
+    assert record["chosen"] == min(figures, key=figures.get)
+    removal = out / record["removal"]
+    assert removal.is_file() and removal.name == {"family": "removal.removal", "response": "removal.response", "mean": "removal.blend"}[record["chosen"]]
+    assert sorted(p.name for p in out.glob("removal.*")) == [removal.name]
+    assert (out / "synthesis.response").is_file() and (out / "family.removal").is_file()
+    assert record["budget"]["epochs"] == 2 and record["budget"]["epochs_given"] and record["budget"]["budget_minutes"] == 45.0
+    assert set(record["stage_seconds"]) >= {"corpus", "family", "response", "score family", "score response", "score mean"}
+    # the figures are evaluate --session's: the mean's, re-run by hand, is the recorded one
+    assert cli("evaluate", *roots, "--session", "true", "--removal", out / "family.removal", "--blend", out / "synthesis.response",
+               "-o", tmp_path / "by_hand") == 0
+    by_hand = json.loads((tmp_path / "by_hand" / "report.json").read_text())["session"]["motion_left_beyond_sag"]
+    assert by_hand == figures["mean"]
+    # the chosen removal is one file remove takes; a network H would not be
+    take = roots[1]
+    assert cli("remove", take, "--model", removal, "-o", tmp_path / "quasistatic.usdc") == 0
+    # a re-run with the same inputs keeps every stage (and its bytes); a changed input redoes what depends on it
+    before = {p: p.stat().st_mtime_ns for p in (out / "family.removal", out / "synthesis.response")}
+    capsys.readouterr()
+    assert main([str(a) for a in ("calibrate", *roots, "-o", out, *flags)]) == 0
+    assert "done before, kept" in capsys.readouterr().err
+    assert {p: p.stat().st_mtime_ns for p in before} == before
+    assert cli("calibrate", *roots, "-o", out, *flags[:-2], "--settle", "0.4") == 0
+    assert (out / "family.removal").stat().st_mtime_ns == before[out / "family.removal"]
+    assert (out / "synthesis.response").stat().st_mtime_ns != before[out / "synthesis.response"]
+
+
+def test_calibrate_refuses_takes_in_another_skull_frame_or_without_a_rig(actor_session, tmp_path, capsys):
+    rig, roots = actor_session
+    assert cli("calibrate", *roots, "-o", tmp_path / "out") == 2  # --rig is required
+    assert cli("calibrate", roots[0], "--rig", rig, "-o", tmp_path / "out") == 2  # one take: nothing to leave out
+    other = write_blendshape_rig(default_face(6), tmp_path / "other.usda")
+    assert cli("calibrate", *roots, "--rig", other, "-o", tmp_path / "out") != 0
+    errors = capsys.readouterr().err
+    assert "--rig is required" in errors and "at least two" in errors and "Traceback" not in errors
+    assert not (tmp_path / "out").exists()
