@@ -10,6 +10,7 @@ from facedyn.geometry import quaternion
 from facedyn.performance import UVs, Topology
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
+from facedyn.usd.runs import content_id
 from facedyn.usd.layers import LayerContent, write_layer, write_take_root
 from facedyn.usd.rootedit import attach
 from facedyn.usd.take import read_take
@@ -87,7 +88,7 @@ def test_result_layer_composes_over_capture_and_reproduces_world_points(tmp_path
     face = composed.GetPrimAtPath("/Performance/Skull/Face")
     runs = {run["processor"]: run for run in schema.read_provenance(face)}
     assert set(runs) == {"import", "stabilize"} and runs["stabilize"]["inputs"] == ["./capture.usdc"]
-    assert runs["stabilize"]["role"] == "stabilized" and runs["stabilize"]["inputRuns"] == [dict(Sdf.Layer.OpenAsAnonymous(str(capture)).customLayerData)["facedyn"]["run"]]
+    assert runs["stabilize"]["role"] == "stabilized" and runs["stabilize"]["inputRuns"] == [content_id(capture)]
     # Every covered frame is authored; offsets carry their interpolation.
     assert list(layer.GetAttributeAtPath("/Performance/Skull/Face.points").GetInfo("timeSamples").keys()) == list(FRAMES)
     assert face.GetAttribute(schema.OFFSETS_ATTR).GetMetadata("interpolation") == "vertex"
