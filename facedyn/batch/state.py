@@ -19,17 +19,14 @@ from pathlib import Path
 
 import facedyn
 from facedyn.batch.plan import StepPlan
+from facedyn.io.files import sha256_of_file
 
 STATE_FILE = ".batch.json"
 
 
 def file_checksum(path: Path) -> str:
     """sha256 of the file's bytes."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    return sha256_of_file(path)
 
 
 def input_checksums(plan: StepPlan) -> dict[str, str]:

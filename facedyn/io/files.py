@@ -10,6 +10,7 @@ the usual umask), so a failed write never leaves a partial or hidden file behind
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import stat
 import tempfile
@@ -131,3 +132,12 @@ def new_file_mode() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return 0o666 & ~mask
+
+
+def sha256_of_file(path: str | PathLike, block: int = 1 << 22) -> str:
+    """The sha256 (hex) of a file's bytes, streamed a block at a time: never the whole file in memory."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for chunk in iter(lambda: handle.read(block), b""):
+            digest.update(chunk)
+    return digest.hexdigest()

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from facedyn.io.files import write_atomically
+from facedyn.io.files import sha256_of_file, write_atomically
 from facedyn.progress import Progress
 
 RECORD = "stages.json"
@@ -41,11 +41,7 @@ def file_state(paths) -> list:
 
 def file_digest(path: Path) -> str:
     """SHA-256 of a file's bytes (a rig: what a corpus is simulated from)."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    return sha256_of_file(path)
 
 
 class Stages:

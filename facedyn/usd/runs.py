@@ -22,6 +22,7 @@ from pathlib import Path
 
 from pxr import Sdf, Tf
 
+from facedyn.io.files import sha256_of_file
 from facedyn.usd.clips import CLIPS_SUFFIX, clips_folder, glob_escape
 
 ID_LENGTH = 16  # hex digits kept of a sha256: 64 bits, ample to tell runs of one take apart
@@ -119,11 +120,7 @@ def file_digest(path: str | os.PathLike) -> str:
     stat = path.stat()
     key = (str(path), stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns, stat.st_ctime_ns)
     if key not in _DIGESTS:
-        digest = hashlib.sha256()
-        with open(path, "rb") as f:
-            for block in iter(lambda: f.read(BLOCK), b""):
-                digest.update(block)
-        _DIGESTS[key] = digest.hexdigest()[:ID_LENGTH]
+        _DIGESTS[key] = sha256_of_file(path, BLOCK)[:ID_LENGTH]
     return _DIGESTS[key]
 
 
