@@ -18,6 +18,7 @@ def _chunked(resampler, values, chunk):
     return np.concatenate([resampler.resample(w, values[w.lo:w.hi]) for w in resampler.windows(chunk)])
 
 
+@pytest.mark.slow  # resamples a long take chunk by chunk and whole (about 15 s)
 @pytest.mark.parametrize("rate", [120.0, 50.0])
 def test_chunks_equal_the_whole_spline_with_gaps_and_uneven_samples(rate):
     rng = np.random.default_rng(7)

@@ -449,6 +449,7 @@ def test_a_held_expression_on_springs_stiff_along_the_normal_stays_stable():
     assert np.abs(lazy - eager).max() < 0.01 * np.abs(eager).max() < 0.1
 
 
+@pytest.mark.slow  # simulates seconds of a creeping expression on stiff springs (about 20 s)
 def test_an_expression_that_never_quite_holds_still_stays_stable_on_springs_stiff_along_the_normal():
     """The held expression above, creeping by 1e-4 of a weight as a Live Link curve does: its gain
     moves on every frame but drifts less than the tolerance, so the correction stayed explicit
