@@ -110,7 +110,8 @@ class CalibrateProcessor(Processor):
         return Plan(description, (request, roots, rig, specs))
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
-        from facedyn.processors.stages import Stages, file_digest, file_state, key_of
+        from facedyn.io.files import sha256_of_file
+        from facedyn.processors.stages import Stages, file_state, key_of
 
         request, roots, rig, specs = plan.state
         params = request.params
@@ -119,8 +120,9 @@ class CalibrateProcessor(Processor):
         stages = Stages(out, progress)
         started = time.perf_counter()
         session = file_state(roots)
-        corpus_key = key_of("corpus", file_digest(params["rig"]), [s.name for s in specs], corpus_description(params))
-        corpus = stages.run("corpus", corpus_key, [out / "corpus"], lambda: build_family_corpus(out / "corpus", rig, specs, params, progress))
+        corpus_key = key_of("corpus", sha256_of_file(params["rig"]), [s.name for s in specs], corpus_description(params))
+        corpus = stages.run("corpus", corpus_key, [out / "corpus"], lambda: build_family_corpus(out / "corpus", rig, specs, params, progress),
+                            resumes=True)
         budget = training_budget(params, corpus, stages.seconds().get("corpus", time.perf_counter() - started))
         progress.start(f"budget {params['budget_minutes']:g} min: F trains {budget['epochs']} epochs of {budget['subsample']:.0%} of "
                        f"{budget['pairs']:,} pairs ({budget['training_seconds_planned'] / 60:.1f} min planned)", 1)
@@ -159,7 +161,7 @@ class CalibrateProcessor(Processor):
 
 
 def corpus_description(params: dict) -> dict:
-    """The recommended corpus's flags, as `synth` records them."""
+    """The recommended corpus's flags, as `simulate` records them."""
     return {"scale": params["corpus_scale"], "rig": str(params["rig"]), "noise_cm": NOISE_CM, "seed": params["seed"], "physics": "tissue",
             "randomize_tissue": "take", "extra_motions": True, "impacts": True, "data": str(params["data"] or ""),
             "only": params["corpus_only"]}
@@ -168,17 +170,12 @@ def corpus_description(params: dict) -> dict:
 def corpus_specs(rig, params: dict) -> list:
     """The recommended protocol's takes (README: synth --scale standard --randomize-tissue take --extra-motions --impacts
     --noise 0.01 --data DATA)."""
-    import fnmatch
+    from facedyn.sim.corpus import check_data_folder, protocol, takes_matching
 
-    from facedyn.sim.corpus import protocol
-
+    check_data_folder(params["data"], params["corpus_scale"])
     specs = protocol(rig, params["corpus_scale"], params["data"], seed=params["seed"], noise_cm=NOISE_CM, physics="tissue",
                      randomize_tissue="take", extra_motions=True, impacts=True)
-    if params["corpus_only"]:
-        specs = [s for s in specs if fnmatch.fnmatch(s.name, params["corpus_only"])]
-        if not specs:
-            raise UsageError(f"--corpus-only: no take of the {params['corpus_scale']} protocol matches {params['corpus_only']!r}")
-    return specs
+    return takes_matching(specs, params["corpus_only"], params["corpus_scale"], "--corpus-only")
 
 
 def build_family_corpus(folder: Path, rig, specs: list, params: dict, progress: Progress) -> dict:

@@ -206,7 +206,7 @@ def _import_root(processor: Processor, request: Request) -> Path | None:
 def _write_layer(processor: Processor, request: Request, output: LayerOutput) -> dict[str, Any]:
     from facedyn.errors import UsageError
     from facedyn.usd import layers, schema
-    from facedyn.usd.rootedit import attach_written_layer
+    from facedyn.usd.rootedit import attach_written_layer, remove_created_root
     from facedyn.usd.stackstatus import covers_take
 
     frames = output.layer.frames
@@ -239,7 +239,7 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
                                       create_with=output.timing if output.define else None, actor=output.actor)
     except BaseException:
         if not root_existed:
-            _remove_created_root(root, request.output)
+            remove_created_root(root, request.output)
         raise
     report.update(root=str(root), sublayers=placed.sublayers, stale=placed.stale)
     return report
@@ -276,40 +276,6 @@ def _with_files(inputs: list, files: list[Path]) -> list:
     named = {p.resolve() for p in paths if p.is_absolute()}
     return list(inputs) + [f for f in files if f not in named]
 
-
-def _remove_created_root(root: Path, layer: Path) -> None:
-    """After a failed run, the take root it created (if it lists nothing but this run's layer) and the root's lock file.
-
-    A root this run made and could not finish would be a broken take.usda, and its lock
-    file alone would keep the output's folder from being removed. The lock file
-    (facedyn.usd.rootedit.root_lock's `.NAME.lock`) goes only when no one holds it.
-    """
-    import fcntl
-
-    from pxr import Sdf, Tf
-
-    if root.is_file():
-        try:
-            listed = Sdf.Layer.OpenAsAnonymous(str(root), metadataOnly=True)
-        except Tf.ErrorException:
-            listed = None
-        others = [a for a in (listed.subLayerPaths if listed else []) if (root.parent / a).resolve() != layer.resolve()]
-        if others:
-            return
-        root.unlink()
-    lock = root.parent / f".{root.name}.lock"
-    try:
-        fd = os.open(lock, os.O_RDWR)
-    except OSError:
-        return
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        if not root.exists():
-            lock.unlink()
-    except OSError:
-        pass  # another run holds it: its root is its own
-    finally:
-        os.close(fd)
 
 
 def _plain(value: Any) -> Any:

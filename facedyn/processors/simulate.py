@@ -8,7 +8,6 @@ same folder keeps the takes already complete and simulates only the rest
 """
 from __future__ import annotations
 
-import fnmatch
 import os
 import sys
 from pathlib import Path
@@ -45,7 +44,7 @@ class SimulateProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.sim.corpus import check_data_folder, protocol
+        from facedyn.sim.corpus import check_data_folder, protocol, takes_matching
 
         params = request.params
         check_data_folder(params["data"], params["scale"])
@@ -56,10 +55,7 @@ class SimulateProcessor(Processor):
         specs = protocol(rig, params["scale"], params["data"], seed=params["seed"], noise_cm=params["noise"],
                          physics=params["physics"], extra_motions=params["extra_motions"], impacts=params["impacts"],
                          randomize_tissue=None if params["randomize_tissue"] == "none" else params["randomize_tissue"], soft_hz=band)
-        if params["only"]:
-            specs = [s for s in specs if fnmatch.fnmatch(s.name, params["only"])]
-            if not specs:
-                raise UsageError(f"--only: no take of the {params['scale']} protocol matches {params['only']!r}")
+        specs = takes_matching(specs, params["only"], params["scale"])
         description = {"takes": len(specs), "rig": str(params["rig"] or "built-in"), "points": rig.point_count}
         return Plan(description, (request, rig, specs))
 

@@ -2,7 +2,7 @@
 
 A stage's outputs are written into the folder (each atomically, by the step that makes it),
 then the stage is recorded in the folder's `stages.json` with a key: a hash of everything
-its result depends on (its parameters, its input files' sizes and times, the keys of the
+its result depends on (its parameters, its input files' contents, the keys of the
 stages it reads). A re-run skips a stage whose record has the same key and whose outputs
 are all there, and does again (outputs removed first) one that is missing, interrupted or
 stale, so an interrupted run resumes where it stopped and a changed input is not missed.
@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from facedyn.io.files import sha256_of_file, write_atomically
+from facedyn.io.files import write_atomically
 from facedyn.progress import Progress
 
 RECORD = "stages.json"
@@ -28,20 +28,16 @@ def key_of(*parts) -> str:
 
 
 def file_state(paths) -> list:
-    """What says a set of input files changed: each one's resolved path, size and time; a take
-    root stands for every USD file of its folder (its layers)."""
+    """What says a set of input files changed: each one's resolved path and content id
+    (facedyn.usd.runs.content_id, as staleness reads layers); a take root stands for every USD
+    file of its folder (its layers)."""
+    from facedyn.usd.runs import content_id
+
     state = []
     for path in map(Path, paths):
         files = sorted(path.parent.glob("*.usd*")) if path.suffix.lower().startswith(".usd") and path.name.startswith("take.") else [path]
-        for file in files:
-            stat = file.stat()
-            state.append([str(file.resolve()), stat.st_size, stat.st_mtime_ns])
+        state.extend([str(file.resolve()), content_id(file)] for file in files)
     return state
-
-
-def file_digest(path: Path) -> str:
-    """SHA-256 of a file's bytes (a rig: what a corpus is simulated from)."""
-    return sha256_of_file(path)
 
 
 class Stages:
@@ -57,15 +53,16 @@ class Stages:
         if not isinstance(self.done, dict):
             self.done = {}
 
-    def run(self, name: str, key: str, outputs: list[Path], compute: Callable[[], dict]) -> dict:
+    def run(self, name: str, key: str, outputs: list[Path], compute: Callable[[], dict], *, resumes: bool = False) -> dict:
         """compute()'s result (JSON-able), or the recorded one when the stage is done with this
-        key and its outputs are there; `outputs` are removed before the stage runs again."""
+        key and its outputs are there; `outputs` are removed before the stage runs again, unless
+        the stage `resumes` from them itself (a corpus keeps its complete takes of the same recipe)."""
         entry = self.done.get(name)
         if isinstance(entry, dict) and entry.get("key") == key and all(Path(p).exists() for p in outputs):
             self.progress.start(f"{name}: done before, kept", 1)
             self.progress.finish()
             return entry["result"]
-        for path in map(Path, outputs):
+        for path in [] if resumes else map(Path, outputs):
             if path.is_dir():
                 shutil.rmtree(path)
             elif path.exists():

@@ -387,6 +387,19 @@ def data_files(scale: str) -> list[str]:
     return files + ([f"livelink-face/{csv}" for csv in PERFORMANCES] if scale == "standard" else [])
 
 
+def takes_matching(specs: list[TakeSpec], pattern: str, scale: str, flag: str = "--only") -> list[TakeSpec]:
+    """The protocol's takes whose name matches the glob `pattern` (all when it is empty); a
+    UsageError when none does, so a mistyped pattern never plans an empty corpus."""
+    import fnmatch
+
+    if not pattern:
+        return specs
+    matching = [s for s in specs if fnmatch.fnmatch(s.name, pattern)]
+    if not matching:
+        raise UsageError(f"{flag}: no take of the {scale} protocol matches {pattern!r}")
+    return matching
+
+
 def check_data_folder(data_dir: Path | None, scale: str, flag: str = "--data") -> None:
     """A UsageError unless `data_dir` (when given) is a folder holding every file the protocol
     reads from it: a mistyped folder must not quietly give a corpus without its dialog takes."""

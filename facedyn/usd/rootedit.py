@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
-from pxr import Sdf, Vt
+from pxr import Sdf, Tf, Vt
 
 from facedyn.errors import UsageError
 from facedyn.performance import role as find_role
@@ -38,6 +38,42 @@ LOCK_MODE = 0o644
 ACTOR_KEY = "actor"  # root customLayerData["facedyn"][ACTOR_KEY]: the take's actor asset, relative to the root
 
 
+def lock_file(root: str | os.PathLike) -> Path:
+    """The kept `.NAME.lock` file beside a take root that `root_lock` flocks."""
+    root = Path(root)
+    return root.parent / f".{root.name}.lock"
+
+
+def remove_created_root(root: Path, layer: Path) -> None:
+    """After a failed run, the take root it created (if it lists nothing but this run's layer) and the root's lock file.
+
+    A root this run made and could not finish would be a broken take.usda, and its lock
+    file alone would keep the output's folder from being removed. The lock file goes only
+    when no one holds it and no root is left for it to guard.
+    """
+    if root.is_file():
+        try:
+            listed = Sdf.Layer.OpenAsAnonymous(str(root), metadataOnly=True)
+        except Tf.ErrorException:  # a root left half-written: nothing in it to keep
+            listed = None
+        others = [a for a in (listed.subLayerPaths if listed else []) if (root.parent / a).resolve() != layer.resolve()]
+        if others:
+            return
+        root.unlink()
+    try:
+        fd = os.open(lock_file(root), os.O_RDWR)
+    except OSError:
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        if not root.exists():
+            lock_file(root).unlink()
+    except OSError:
+        pass  # another run holds it: its root is its own
+    finally:
+        os.close(fd)
+
+
 @contextmanager
 def root_lock(root: str | os.PathLike) -> Iterator[None]:
     """Hold an exclusive advisory lock on root: flock on a kept `.NAME.lock` file beside it.
@@ -51,7 +87,7 @@ def root_lock(root: str | os.PathLike) -> Iterator[None]:
     takes the same lock, not a text editor.
     """
     root = Path(root)
-    lock_path = root.parent / f".{root.name}.lock"
+    lock_path = lock_file(root)
     try:
         fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, LOCK_MODE)
     except OSError as exc:

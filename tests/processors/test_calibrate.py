@@ -84,3 +84,11 @@ def test_calibrate_refuses_takes_in_another_skull_frame_or_without_a_rig(actor_s
     errors = capsys.readouterr().err
     assert "--rig is required" in errors and "at least two" in errors and "Traceback" not in errors
     assert not (tmp_path / "out").exists()
+
+
+def test_calibrate_refuses_a_data_folder_that_lacks_what_the_corpus_reads(actor_session, tmp_path, capsys):
+    rig, roots = actor_session
+    assert cli("calibrate", *roots, "--rig", rig, "--data", tmp_path / "no-such-data", "-o", tmp_path / "out") == 2
+    errors = capsys.readouterr().err
+    assert "--data" in errors and "no such folder" in errors and "Traceback" not in errors
+    assert not (tmp_path / "out").exists()
