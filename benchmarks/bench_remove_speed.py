@@ -51,14 +51,14 @@ ROWS, COLS, FPS, SAMPLES = 148, 76, 120.0, 344
 ICT_RIG = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"
 
 
-def sheet() -> tuple[np.ndarray, Topology, np.ndarray]:
-    """(points, topology, rigid vertices) of a 20 x 16 cm sheet bent like a face."""
-    ys, xs = np.mgrid[0:ROWS, 0:COLS].astype(np.float64)
-    angle = (xs / (COLS - 1) - 0.5) * 1.6
-    points = np.stack([10 * np.sin(angle), (ys / (ROWS - 1) - 0.5) * 20, 10 * np.cos(angle) + 0.3 * np.sin(ys / 3)], -1).reshape(-1, 3)
-    a = (np.arange(ROWS - 1)[:, None] * COLS + np.arange(COLS - 1)[None, :]).ravel()
-    tris = np.concatenate([np.stack([a, a + 1, a + COLS + 1], 1), np.stack([a, a + COLS + 1, a + COLS], 1)])
-    rigid = np.arange((ROWS - 12) * COLS, ROWS * COLS)
+def sheet(rows: int = ROWS, cols: int = COLS, rigid_rows: int = 12) -> tuple[np.ndarray, Topology, np.ndarray]:
+    """(points, topology, rigid vertices) of a 20 x 16 cm sheet bent like a face, its top `rigid_rows` rigid."""
+    ys, xs = np.mgrid[0:rows, 0:cols].astype(np.float64)
+    angle = (xs / (cols - 1) - 0.5) * 1.6
+    points = np.stack([10 * np.sin(angle), (ys / (rows - 1) - 0.5) * 20, 10 * np.cos(angle) + 0.3 * np.sin(ys / 3)], -1).reshape(-1, 3)
+    a = (np.arange(rows - 1)[:, None] * cols + np.arange(cols - 1)[None, :]).ravel()
+    tris = np.concatenate([np.stack([a, a + 1, a + cols + 1], 1), np.stack([a, a + cols + 1, a + cols], 1)])
+    rigid = np.arange((rows - rigid_rows) * cols, rows * cols)
     return points, Topology(np.full(len(tris), 3, np.int32), tris.ravel().astype(np.int32)), rigid
 
 

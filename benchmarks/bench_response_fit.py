@@ -25,6 +25,7 @@ import os
 import time
 
 import numpy as np
+from bench_remove_speed import sheet
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import DynamicsModel
@@ -32,19 +33,8 @@ from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.training import TrainingSequence
 from facedyn.geometry import quaternion
-from facedyn.performance import Topology
 
 ROWS, COLS, FPS, SAMPLES, SECONDS = 54, 50, 120.0, 344, 4.5
-
-
-def sheet() -> tuple[np.ndarray, Topology, np.ndarray]:
-    """(points, topology, rigid vertices) of a 20 x 16 cm sheet bent like a face."""
-    ys, xs = np.mgrid[0:ROWS, 0:COLS].astype(np.float64)
-    angle = (xs / (COLS - 1) - 0.5) * 1.6
-    points = np.stack([10 * np.sin(angle), (ys / (ROWS - 1) - 0.5) * 20, 10 * np.cos(angle) + 0.3 * np.sin(ys / 3)], -1).reshape(-1, 3)
-    a = (np.arange(ROWS - 1)[:, None] * COLS + np.arange(COLS - 1)[None, :]).ravel()
-    tris = np.concatenate([np.stack([a, a + 1, a + COLS + 1], 1), np.stack([a, a + COLS + 1, a + COLS], 1)])
-    return points, Topology(np.full(len(tris), 3, np.int32), tris.ravel().astype(np.int32)), np.arange((ROWS - 6) * COLS, ROWS * COLS)
 
 
 def session(points: np.ndarray, count: int) -> list[TrainingSequence]:
@@ -83,7 +73,7 @@ def main() -> None:
     parser.add_argument("--module", default="facedyn.dynamics.response", help="the module whose fit_linear_response to time")
     args = parser.parse_args()
     fit_linear_response = importlib.import_module(args.module).fit_linear_response
-    points, topology, rigid = sheet()
+    points, topology, rigid = sheet(ROWS, COLS, rigid_rows=6)
     face = FaceSetup.build(topology, points, rigid_vertices=rigid, sample_count=SAMPLES)
     motion = SkullMotionInput()
     spec = NetworkSpec(len(face.landmarks) * motion.width * 3 + 2 * len(face.samples), SYNTHESIS_HIDDEN, 3 * len(face.samples))
