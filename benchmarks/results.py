@@ -42,6 +42,8 @@ SECTIONS = (
     ("bench_import", "Import memory", "Streaming import of long USD caches and OBJ sequences."),
     ("bench_import_skel", "UsdSkel import memory", "A UsdSkel rig's skinning baked one chunk at a time."),
     ("bench_train_memory", "Training memory", "Training through the on-disk feature store."),
+    ("bench_model_load_memory", "Model load memory",
+     "The peak of loading a model file beside the arrays it declares; the libraries' one-time first use kept apart."),
     ("bench_batch", "Farms", "usdfacedyn batch on a local Dask cluster."),
     ("bench_motion_spectrum", "Skull motion spectra", "Where the skull's acceleration power lies, 6-15 Hz, procedural gaits beside real mocap."),
     ("tests", "The test suite", "The time of the README's test command."),

@@ -17,7 +17,10 @@ Reading is safe against crafted files, not only against pickles: only regular fi
 opened, the header size and every declared count (arrays, dimensions, layers, widths) are
 bounded, the array table must tile the file exactly, and the architecture must match the
 arrays present before a network is allocated, so a file can never make facedyn allocate
-much more than its own size. Version 2 stores SHA-256 checksums of the metadata (its
+much more than its own size. Loading reads each array once, straight into an array of its
+own, hashing the bytes as they arrive, and the network takes those arrays over as its
+weights without a copy (built on torch's meta device, never initialized), so a load's peak
+is about the arrays themselves (benchmarks/bench_model_load_memory.py). Version 2 stores SHA-256 checksums of the metadata (its
 canonical JSON) and of the arrays (their table and bytes), verified on every load, so a
 damaged or edited file (flipped weight signs, a changed frame rate) is refused. They
 detect changes, they do not authenticate an author. Version 1 files, written before
@@ -245,6 +248,9 @@ def read_model_file(path) -> tuple[dict, dict[str, np.ndarray]]:
 
 
 def _read(path: Path) -> _Stored:
+    """The checked file, its arrays read once: each straight into its own array, hashed as it
+    arrives, so loading holds the arrays and nothing else the size of the file (no copy of
+    the raw bytes, no byte-order copy on a little-endian machine)."""
     try:
         handle, size = open_regular(path)
     except InputError as exc:
@@ -263,28 +269,48 @@ def _read(path: Path) -> _Stored:
         if header_size > size - 16:
             raise ModelFileError(f"{path} has a header of {header_size} bytes, more than the file holds")
         header = _header(path, handle.read(header_size))
-        data_size = size - 16 - header_size
-        specs = _array_table(path, header["arrays"], data_size)
-        data = handle.read(data_size)
-    if len(data) != data_size:
-        raise ModelFileError(f"{path} changed while it was read")
-    metadata = header["metadata"]
-    version = _version(path, metadata)
+        specs = _array_table(path, header["arrays"], size - 16 - header_size)
+        metadata = header["metadata"]
+        version = _version(path, metadata)
+        digest = hashlib.sha256(_canonical(header["arrays"]))
+        arrays = {name: _read_array(path, handle, dtype, shape, count, digest) for name, (dtype, shape, _, count) in specs.items()}
     stored_sums = header.get("checksums")
     if version in UNCHECKED_VERSIONS:
         sums = None
     else:
-        sums = checksums(metadata, header["arrays"], [data])
+        sums = {"metadata": hashlib.sha256(_canonical(metadata)).hexdigest(), "arrays": digest.hexdigest()}
         for part in ("metadata", "arrays"):
             if not isinstance(stored_sums, dict) or stored_sums.get(part) != sums[part]:
                 raise ModelFileError(f"{path}: its {part} do not match the checksum saved with them; the file was changed or damaged after it was written: re-save or retrain the model")
-    arrays = {}
-    for name, (dtype, shape, offset, count) in specs.items():
-        arr = np.frombuffer(data, dtype=dtype, count=count, offset=offset).reshape(shape).astype(dtype.newbyteorder("="))
-        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+    for name, arr in arrays.items():
+        if arr.dtype.kind == "f" and not _finite(arr):
             raise ModelFileError(f"{path}: array {name!r} holds NaN or infinite values")
-        arrays[name] = arr
     return _Stored(metadata, arrays, sums, size)
+
+
+READ_BYTES = 8 << 20  # bytes read (and hashed) at a time
+
+
+def _read_array(path: Path, handle, dtype: np.dtype, shape: tuple, count: int, digest) -> np.ndarray:
+    """The next array of the file, read into an array of its own (native byte order), its bytes fed to `digest`."""
+    arr = np.empty(count, dtype)
+    raw = memoryview(arr.view(np.uint8))
+    done = 0
+    while done < len(raw):
+        got = handle.readinto(raw[done:done + READ_BYTES])
+        if not got:
+            raise ModelFileError(f"{path} changed while it was read")
+        digest.update(raw[done:done + got])
+        done += got
+    if not arr.dtype.isnative:
+        arr = arr.byteswap().view(arr.dtype.newbyteorder("="))
+    return arr.reshape(shape)
+
+
+def _finite(arr: np.ndarray, block: int = 1 << 20) -> bool:
+    """No NaN or infinity in arr, checked a block at a time (no mask the size of the array)."""
+    flat = arr.reshape(-1)
+    return all(np.isfinite(flat[i:i + block]).all() for i in range(0, flat.size, block))
 
 
 def _header(path: Path, raw: bytes) -> dict:
@@ -407,8 +433,7 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
         if kind == "removal" and "skull" not in windows:
             raise ModelFileError(f"{path}: a removal model needs windows.skull, the frames its skin features span")
         _check_skull_motion(path, metadata.get("skull_motion"))
-        network = Network(spec)
-        network.load_state_dict({k[len("network/"):]: torch.from_numpy(v) for k, v in arrays.items() if k.startswith("network/")})
+        network = _network(spec, arrays)
         face = FaceSetup(
             topology=_topology(path, arrays, metadata["point_count"]),
             rest_points=arrays["face/rest_points"],
@@ -438,6 +463,17 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
         model.warnings.append(f"{path} is model format version {metadata['version']}, written without checksums, so damage to it cannot be detected; re-save it (load and save it with this facedyn) to add them")
     network.eval()
     return model
+
+
+def _network(spec: NetworkSpec, arrays: dict[str, np.ndarray]) -> Network:
+    """The network of the stored weights, which it takes over without a copy: built on the
+    meta device (nothing allocated, no random initialization), then given the arrays."""
+    with torch.device("meta"):
+        network = Network(spec)
+    state = {name[len("network/"):]: torch.from_numpy(np.asarray(value, np.float32))
+             for name, value in arrays.items() if name.startswith("network/")}
+    network.load_state_dict(state, assign=True)
+    return network
 
 
 def _check_skull_motion(path: Path, value) -> None:

@@ -354,3 +354,29 @@ def test_a_nan_frame_rate_never_matches(tmp_path):
     loaded = load_model(save_model(make_model(), tmp_path / "actor.fdyn"))
     with pytest.raises(ModelMismatch, match="runs at nan fps"):
         loaded.check_compatible(fps=float("nan"))
+
+
+def test_loaded_weights_are_ordinary_float32_parameters_whatever_dtype_the_file_stores(tmp_path):
+    """Loading hands the file's arrays to the network without a copy; a crafted float64 or int32 weight still
+    becomes a float32 parameter on the CPU that trains, as a copy into a fresh network would have made it."""
+    model = make_model()
+    blob = save_model(model, tmp_path / "actor.fdyn").read_bytes()
+    header, data = _parts(blob)
+    entry = header["arrays"]["network/layers.4.weight"]
+    start, end = entry["offset"], entry["offset"] + 4 * int(np.prod(entry["shape"]))
+    wide = np.frombuffer(data[start:end], "<f4").astype("<f8").tobytes()
+
+    def widen(h):
+        h["arrays"]["network/layers.4.weight"]["dtype"] = "float64"
+        for name, spec in h["arrays"].items():
+            if spec["offset"] > entry["offset"]:
+                spec["offset"] += len(wide) - (end - start)
+    loaded = load_model(craft(tmp_path / "wide.fdyn", blob, widen, data=data[:start] + wide + data[end:]))
+    tensors = list(loaded.network.parameters()) + list(loaded.network.buffers())
+    assert all(t.dtype == torch.float32 and t.device.type == "cpu" for t in tensors)
+    assert all(p.requires_grad for p in loaded.network.parameters())
+    x = torch.randn(20, 378)
+    with torch.no_grad():
+        np.testing.assert_array_equal(loaded.network(x).numpy(), model.network(x).numpy())
+    loaded.network(x).sum().backward()
+    assert loaded.network.layers[0].weight.grad is not None
