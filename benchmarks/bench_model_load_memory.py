@@ -14,7 +14,8 @@ keep it apart:
   arrays) first in a process: almost all of it that one-time cost (``first_use_file_backed_mib``
   of it is library code read from disk);
 - ``load_peak_mib``: the peak of then loading the case's model in that process (the small
-  model kept alive, so its freed memory cannot hide the new load's);
+  model kept alive, so its freed memory cannot hide the new load's; a load of less than what
+  the interpreter has freed before may still reuse that and show less than its arrays);
 - ``first_load_peak_mib``: the peak of loading the case's model first in a process of its own,
   the one-time cost included, as a one-off command sees it.
 
