@@ -50,16 +50,20 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import torch
 
 from facedyn.dynamics.face import FaceSetup
-from facedyn.dynamics.network import Network, NetworkSpec
+from facedyn.dynamics.netspec import NetworkSpec
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.errors import FacedynError
 from facedyn.io.errors import InputError, quoted
 from facedyn.io.files import open_regular, write_atomically
 from facedyn.performance import Topology
+
+if TYPE_CHECKING:
+    from facedyn.dynamics.network import Network
 
 MAGIC = b"FDYNMDL1"
 FORMAT_VERSION = 2
@@ -113,9 +117,11 @@ class DynamicsModel:
     @property
     def skull_input(self) -> SkullMotionInput:
         """The skull features the network reads, spelled out also for the paper's default."""
-        if self.skull_motion is not None:
-            return self.skull_motion
-        return SkullMotionInput("velocity", self.windows["skull"], self.windows["skull"])
+        return _skull_input(self.skull_motion, self.windows)
+
+    @property
+    def spec(self) -> NetworkSpec:
+        return self.network.spec
 
     @property
     def fingerprint(self) -> str:
@@ -137,6 +143,13 @@ class DynamicsModel:
 
             self._propagator = build_propagator(self.face.rest_points, self.face.topology.triangles(), self.face.samples, self.face.rigid_vertices)
         return self._propagator
+
+
+def _skull_input(skull_motion: SkullMotionInput | None, windows: dict) -> SkullMotionInput:
+    """The recorded skull_motion input, or the paper's B(t): velocities over windows["skull"] either side."""
+    if skull_motion is not None:
+        return skull_motion
+    return SkullMotionInput("velocity", windows["skull"], windows["skull"])
 
 
 def checksums(metadata: dict, table: dict, data: Iterable[bytes]) -> dict[str, str]:
@@ -415,8 +428,44 @@ def _legacy_response(metadata: dict) -> bool:
     return metadata.get("kind") == "synthesis" and isinstance(calibration, dict) and calibration.get("response") == "linear"
 
 
+@dataclass
+class _Checked:
+    """One stored model checked against its metadata, its network not built: what `inspect`
+    shows without importing torch, and what `_build` makes a DynamicsModel of."""
+
+    kind: str
+    spec: NetworkSpec
+    face: FaceSetup
+    fps: float
+    windows: dict
+    info: dict
+    arrays: dict[str, np.ndarray]  # kind-specific (the file's extra/ arrays)
+    skull_motion: SkullMotionInput | None
+    warnings: list[str]
+
+    @property
+    def skull_input(self) -> SkullMotionInput:
+        return _skull_input(self.skull_motion, self.windows)
+
+    @property
+    def fingerprint(self) -> str:
+        return self.face.fingerprint
+
+
 def _build(path: Path, stored: _Stored) -> DynamicsModel:
-    """The model a checked file describes; every inconsistency is a ModelFileError."""
+    """The model a checked file describes, its network holding the stored weights."""
+    checked = _check(path, stored)
+    try:
+        network = _network(checked.spec, stored.arrays)
+    except (RuntimeError, ValueError) as exc:
+        raise ModelFileError(f"{path} is an incomplete or inconsistent model: {type(exc).__name__}: {str(exc)[:200]}") from None
+    network.eval()
+    return DynamicsModel(kind=checked.kind, network=network, face=checked.face, fps=checked.fps, windows=checked.windows,
+                         info=checked.info, arrays=checked.arrays, skull_motion=checked.skull_motion, warnings=checked.warnings)
+
+
+def _check(path: Path, stored: _Stored) -> _Checked:
+    """The model a checked file describes, before its network is built; every inconsistency is a ModelFileError."""
     metadata, arrays = stored.metadata, stored.arrays
     try:
         spec = _architecture(path, metadata.get("architecture"), arrays)
@@ -433,7 +482,6 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
         if kind == "removal" and "skull" not in windows:
             raise ModelFileError(f"{path}: a removal model needs windows.skull, the frames its skin features span")
         _check_skull_motion(path, metadata.get("skull_motion"))
-        network = _network(spec, arrays)
         face = FaceSetup(
             topology=_topology(path, arrays, metadata["point_count"]),
             rest_points=arrays["face/rest_points"],
@@ -441,15 +489,16 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
             landmarks=_points(path, "skull_landmarks", metadata["skull_landmarks"]),
             rigid_vertices=arrays["face/rigid_vertices"],
         )
-        model = DynamicsModel(
+        model = _Checked(
             kind=kind,
-            network=network,
+            spec=spec,
             face=face,
             fps=float(fps),
             windows=dict(windows),
             info={k: v for k, v in metadata.items() if k not in _RESERVED},
             arrays={k[len("extra/"):]: v for k, v in arrays.items() if k.startswith("extra/")},
             skull_motion=SkullMotionInput.from_json(metadata["skull_motion"]) if "skull_motion" in metadata else None,
+            warnings=[],
         )
     except (KeyError, TypeError, RuntimeError, ValueError) as exc:
         if isinstance(exc, FacedynError):
@@ -461,13 +510,16 @@ def _build(path: Path, stored: _Stored) -> DynamicsModel:
         raise ModelFileError(f"{path}: its stored topology hashes to {model.fingerprint}, not the recorded {str(recorded)[:40]}")
     if stored.checksums is None:
         model.warnings.append(f"{path} is model format version {metadata['version']}, written without checksums, so damage to it cannot be detected; re-save it (load and save it with this facedyn) to add them")
-    network.eval()
     return model
 
 
 def _network(spec: NetworkSpec, arrays: dict[str, np.ndarray]) -> Network:
     """The network of the stored weights, which it takes over without a copy: built on the
     meta device (nothing allocated, no random initialization), then given the arrays."""
+    import torch
+
+    from facedyn.dynamics.network import Network
+
     with torch.device("meta"):
         network = Network(spec)
     state = {name[len("network/"):]: torch.from_numpy(np.asarray(value, np.float32))
@@ -509,7 +561,7 @@ def frame_bytes(model: DynamicsModel) -> dict[str, int]:
     beyond a chunk costs (the removal features are computed over a chunk's whole reach).
     """
     sizes = feature_sizes(model)
-    spec = model.network.spec
+    spec = model.spec
     evaluations = sizes["items"] * (sizes["inputs"] + sum(spec.hidden) + spec.outputs)
     mesh = 3 * model.face.point_count * 3
     skull_windows = len(model.face.landmarks) * (2 * model.windows.get("skull", 0) + 1) * 3
@@ -539,7 +591,7 @@ def _check_sizes(path: Path, model: DynamicsModel, file_bytes: int) -> None:
     """
     if model.kind not in ("removal", "synthesis"):
         return
-    spec, sizes = model.network.spec, feature_sizes(model)
+    spec, sizes = model.spec, feature_sizes(model)
     if model.kind == "removal":
         positions = model.arrays.get(_SAMPLE_POSITIONS)
         if positions is not None and positions.shape != (len(model.face.samples), 3):
@@ -634,8 +686,8 @@ def describe_model(path) -> dict:
 
 
 def _describe(path: Path, stored: _Stored) -> dict:
-    """One model's part of `describe_model`."""
-    model = _build(path, stored)
+    """One model's part of `describe_model`: read from the checked file, no network built (no torch imported)."""
+    model = _check(path, stored)
     return {
         "format_version": stored.metadata["version"],
         "kind": model.kind,
@@ -648,8 +700,8 @@ def _describe(path: Path, stored: _Stored) -> dict:
         "samples": int(len(model.face.samples)),
         "landmarks": int(len(model.face.landmarks)),
         "rigid_vertices": int(len(model.face.rigid_vertices)),
-        "architecture": model.network.spec.to_json(),
-        "parameters": int(sum(p.numel() for p in model.network.parameters())),
+        "architecture": model.spec.to_json(),
+        "parameters": model.spec.parameter_count,
         "bytes_per_frame": frame_bytes(model)["per_frame"] if model.kind in ("removal", "synthesis") else None,
         "training": model.info.get("training"),
         **({"calibration": model.info["calibration"]} if model.kind == "response" else {}),

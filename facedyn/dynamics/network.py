@@ -3,7 +3,7 @@
 Removal network F (papers/000 §5.2): [B(t), X_i(t)] (315 + 63) -> dx_i(t) (3), two hidden
 layers of 128, one network shared by all samples. Synthesis network H (§6) has the same
 form, [B(t), S(t)] (315 + 2 per sample) -> dY(t) (3 per sample), two hidden layers of 256,
-so both are a `Network` built from a `NetworkSpec`, saved and loaded the same way
+so both are a `Network` built from a `NetworkSpec` (facedyn.dynamics.netspec), saved and loaded the same way
 (facedyn.dynamics.modelfile).
 
 Inputs are standardized per feature and outputs by a per-coordinate mean and one common
@@ -13,42 +13,15 @@ scale keeps the training loss proportional to the paper's plain L2 loss on offse
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import torch
 from torch import nn
 
+from facedyn.dynamics.netspec import NetworkSpec
 from facedyn.errors import FacedynError
 
 REMOVAL_HIDDEN = (128, 128)
 SYNTHESIS_HIDDEN = (256, 256)
-
-
-@dataclass(frozen=True)
-class NetworkSpec:
-    """The shape of an MLP: input size, hidden layer sizes, output size (ReLU between)."""
-
-    inputs: int
-    hidden: tuple[int, ...]
-    outputs: int
-
-    def __post_init__(self) -> None:
-        sizes = (self.inputs, *self.hidden, self.outputs)
-        if any(int(s) != s or s < 1 for s in sizes):
-            raise ValueError(f"network layer sizes must be positive whole numbers, got {sizes}")
-
-    def to_json(self) -> dict:
-        return {"inputs": int(self.inputs), "hidden": [int(h) for h in self.hidden], "outputs": int(self.outputs), "activation": "relu"}
-
-    @classmethod
-    def from_json(cls, data: dict) -> "NetworkSpec":
-        if data.get("activation", "relu") != "relu":
-            raise ValueError(f"unsupported activation {data.get('activation')!r}; facedyn networks use relu")
-        try:
-            return cls(int(data["inputs"]), tuple(int(h) for h in data["hidden"]), int(data["outputs"]))
-        except (KeyError, TypeError) as exc:
-            raise ValueError(f"network architecture needs inputs, hidden and outputs, got {data!r}") from exc
 
 
 def resolve_device(device: str) -> torch.device:

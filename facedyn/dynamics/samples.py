@@ -14,15 +14,15 @@ samples keep that reach (and a margin) away from seams and open borders.
 The skull landmarks b_1..b_5 only need to be rigidly attached to the skull and spread in
 all three directions, so that any rotation moves some of them; when a take has none,
 they are placed from the rest mesh's bounding box (see `default_landmarks`).
+
+SciPy's graph routines are imported where samples are placed, not with the module: a face
+setup read back from a model file (`usdfacedyn inspect MODEL`) only checks its samples.
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse.csgraph import connected_components, dijkstra
 
 from facedyn.dynamics.stretch import STEP_CM, _corner_uv_indices
-from facedyn.geometry import mesh
-from facedyn.geometry.mesh_topology import edge_graph, graph_distance
 from facedyn.performance import Topology, UVs
 
 SAMPLE_COUNT = 344
@@ -75,6 +75,11 @@ def skin_region(points, topology: Topology, uvs: UVs | None = None, region=None,
     nostrils, an inner mouth chart). Teeth or a mouth bag joined to the skin without a seam
     cannot be told from skin by topology and stay in.
     """
+    from scipy.sparse.csgraph import connected_components
+
+    from facedyn.geometry import mesh
+    from facedyn.geometry.mesh_topology import edge_graph, graph_distance
+
     pts = np.asarray(points, dtype=np.float64)
     tri = topology.triangles().astype(np.int64)
     n = len(pts)
@@ -122,6 +127,10 @@ def farthest_point_samples(points, triangles, count: int = SAMPLE_COUNT, region=
     the vertex farthest (along the region's edges) from every sample so far, lowest index
     on ties. A region in several pieces gets a sample in each piece first.
     """
+    from scipy.sparse.csgraph import dijkstra
+
+    from facedyn.geometry.mesh_topology import edge_graph
+
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ValueError(f"points must be (N, 3), got {pts.shape}")

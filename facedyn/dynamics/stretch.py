@@ -23,8 +23,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from facedyn.kernels import runtime
 from facedyn.performance import Topology, UVs
@@ -131,6 +129,9 @@ class _UVMesh:
     """The triangulated mesh in uv space, split into charts, with a uv point locator."""
 
     def __init__(self, topology: Topology, uvs: UVs, neutral: np.ndarray) -> None:
+        import scipy.sparse as sp  # here, not with the module: facedyn.dynamics.samples reads STEP_CM without SciPy
+        from scipy.sparse.csgraph import connected_components
+
         fvi = np.asarray(topology.face_vertex_indices, dtype=np.int64)
         corner_uv = _corner_uv_indices(fvi, uvs)
         corners = Topology(topology.face_vertex_counts, np.arange(len(fvi), dtype=np.int32)).triangles().astype(np.int64)

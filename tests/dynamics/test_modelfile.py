@@ -380,3 +380,31 @@ def test_loaded_weights_are_ordinary_float32_parameters_whatever_dtype_the_file_
         np.testing.assert_array_equal(loaded.network(x).numpy(), model.network(x).numpy())
     loaded.network(x).sum().backward()
     assert loaded.network.layers[0].weight.grad is not None
+
+
+INSPECT_PROBE = """
+import contextlib, io, json, sys
+import facedyn.cli
+with contextlib.redirect_stdout(io.StringIO()) as out:
+    code = facedyn.cli.main(["inspect", "--json", sys.argv[1]])
+heavy = sorted({m.split(".")[0] for m in sys.modules} & {"torch", "scipy", "pyopencl", "pxr"})
+print(json.dumps({"code": code, "heavy": heavy, "described": json.loads(out.getvalue()) if code == 0 else None}))
+"""
+
+
+def test_inspect_model_reads_the_file_without_torch_or_scipy(tmp_path):
+    """`usdfacedyn inspect MODEL` checks the file (checksums, array table, implied sizes) and builds no network:
+    torch and SciPy stay unimported (issue 40: inspect MODEL <= 0.5 s), and it shows what describe_model does."""
+    import subprocess
+    import sys
+
+    path = save_model(make_model(), tmp_path / "actor.removal")
+    done = subprocess.run([sys.executable, "-c", INSPECT_PROBE, str(path)], capture_output=True, text=True)
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert result["code"] == 0 and result["heavy"] == [], done.stderr
+    assert result["described"] == json.loads(json.dumps(describe_model(path)))
+    blob = bytearray(path.read_bytes())
+    blob[-1] ^= 0xFF  # a weight's last byte: inspect still verifies the checksums
+    (tmp_path / "damaged.removal").write_bytes(bytes(blob))
+    done = subprocess.run([sys.executable, "-m", "facedyn.cli", "inspect", str(tmp_path / "damaged.removal")], capture_output=True, text=True)
+    assert done.returncode == 1 and "do not match the checksum" in done.stderr
