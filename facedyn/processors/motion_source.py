@@ -55,6 +55,23 @@ def skull_motion(source: str, fps: float, frame_count: int, joint: str = "Head",
     return _from_take(path, fps, frame_count)
 
 
+def motion_files(source: str) -> list:
+    """What of `source` a layer made with it records as its inputs, each identified by its content
+    (facedyn.usd.runs), so an edit of the motion makes the layer stale: a BVH file; the layers a
+    take composes (not its root's bytes, which change whenever a layer is attached to it);
+    nothing for a procedural motion (its name and seed are parameters)."""
+    path = Path(source) if source else None
+    if path is None or not path.is_file():
+        return []
+    if not path.suffix.lower().startswith(".usd"):
+        return [path.resolve()]
+    from facedyn.usd.runs import read_elsewhere
+    from facedyn.usd.stage import open_stage
+    from facedyn.usd.take import read_inputs
+
+    return read_elsewhere(read_inputs(open_stage(path)))
+
+
 def _fit(trajectory: motion.SkullTrajectory, frame_count: int, description: str):
     return trajectory.translate[:frame_count].copy(), trajectory.orient[:frame_count].copy(), description
 

@@ -69,6 +69,7 @@ class RetargetProcessor(Processor):
         from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
         from facedyn.dynamics.synthesis import synthesize_dynamics
         from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames
+        from facedyn.usd.runs import read_elsewhere
 
         reader, model, a, params = plan.state
         f = reader.frame_count
@@ -98,6 +99,7 @@ class RetargetProcessor(Processor):
         stats.summary.update({"source": str(params["source"]), "method": params["method"]})
         output = synthesized_layer(reader.time_codes, reader.head.landmarks, reader.source, params["model"], self.writes.role,
                                    stats.summary)
+        output.inputs = list(output.inputs) + read_elsewhere(a.source.inputs)  # actor A's layers, by content
         output.chunks = chunks()
         return output
 

@@ -218,7 +218,7 @@ def _write_layer(processor: Processor, request: Request, output: LayerOutput) ->
         version=f"facedyn {facedyn.__version__}, {processor.name} {processor.version}",
         parameters=parameters,
         frame_range=(first, last),
-        inputs=_with_files(output.inputs, files),
+        inputs=_with_files(output.inputs, files, request.output),
         role=processor.writes.role,
     )
 
@@ -268,14 +268,20 @@ def _recorded_parameters(processor: Processor, request: Request, root: Path | No
     return recorded, files
 
 
-def _with_files(inputs: list, files: list[Path]) -> list:
-    """inputs and, after them, the files not among them already (by real path; labels name no file)."""
+def _with_files(inputs: list, files: list[Path], output: Path) -> list:
+    """inputs and, after them, the files not among them already (by real path; labels name no file),
+    less the output itself: a re-run that read its own earlier result through another take (a
+    take's own root given as its skull motion) would otherwise be stale the moment it is written."""
     from facedyn.usd.runs import LayerInput
 
-    paths = [Path(i.path if isinstance(i, LayerInput) else i) for i in inputs]
-    named = {p.resolve() for p in paths if p.is_absolute()}
-    return list(inputs) + [f for f in files if f not in named]
+    written = Path(output).resolve()
 
+    def path(i) -> Path:
+        return Path(i.path if isinstance(i, LayerInput) else i)
+
+    named = {path(i).resolve() for i in inputs if path(i).is_absolute()}
+    return [i for i in inputs if not (path(i).is_absolute() and path(i).resolve() == written)] + \
+        [f for f in files if f not in named and f != written]
 
 
 def _plain(value: Any) -> Any:

@@ -123,7 +123,9 @@ class StabilizeProcessor(Processor):
                 yield piece.content
             summary.update(solve.summary())
 
-        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.inputs), summary=summary, chunks=chunks())
+        # The actor is read like a layer below (--actor, or the one the take root records): an input identified by its content.
+        actor = [Path(params["actor"]).resolve()] if params["actor"] is not None else []
+        return LayerOutput(layer=layer, timing=source.timing, inputs=list(source.inputs) + actor, summary=summary, chunks=chunks())
 
 
 @dataclass

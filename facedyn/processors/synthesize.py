@@ -46,7 +46,7 @@ class SynthesizeProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.processors.motion_source import skull_motion
+        from facedyn.processors.motion_source import motion_files, skull_motion
 
         reader, model = reader_with_model(request, self.writes.role, *SYNTHESIZES)
         params = request.params
@@ -58,12 +58,12 @@ class SynthesizeProcessor(Processor):
         else:
             (translate, orient), described = reader.skull(), "the take's own"
         description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "skull_motion": described}
-        return Plan(description, (reader, model, params, translate, orient, described))
+        return Plan(description, (reader, model, params, translate, orient, described, motion_files(params["skull_motion"])))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.dynamics.synthesis import synthesize_dynamics
 
-        reader, model, params, translate, orient, described = plan.state
+        reader, model, params, translate, orient, described, motion_inputs = plan.state
         stats = OffsetStats("synthesized")
 
         def chunks():
@@ -79,6 +79,7 @@ class SynthesizeProcessor(Processor):
         stats.summary["skull_motion"] = described
         output = synthesized_layer(reader.time_codes, reader.head.landmarks, reader.source, params["model"], self.writes.role,
                                    stats.summary)
+        output.inputs = list(output.inputs) + motion_inputs
         output.chunks = chunks()
         return output
 

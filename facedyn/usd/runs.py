@@ -55,6 +55,13 @@ class LayerInput:
         return cls(str(path.resolve()), content_id(path)) if path.is_file() else cls(text, "")
 
 
+def read_elsewhere(inputs) -> list[LayerInput]:
+    """Layers a run read from another take (retarget's --source, a take given as skull motion), as
+    inputs of kind FILE: their content is checked like a model's, but they are no layers of the
+    stack the result is placed in, so their absence from it says nothing."""
+    return [LayerInput(i.path, i.run) for i in inputs if i.run]
+
+
 def content_id(path: str | os.PathLike) -> str:
     """A short sha256 of the file at path as a reader reads it: its bytes, and its value clips' ("" if missing)."""
     path = Path(path)

@@ -246,5 +246,7 @@ def test_a_model_named_by_a_parameter_is_recorded_relative_to_the_layer_and_once
     parameters, files = _recorded_parameters(remove, request, request.attach)
     assert parameters["model"] == "../models/f.removal" and files == [(models / "f.removal").resolve()]
     read = [str((take / "capture.usdc").resolve()), str((models / "f.removal").resolve())]  # remove's own inputs name it already
-    assert _with_files(read, files) == read
-    assert _with_files(["DefaultFace"], files) == ["DefaultFace", (models / "f.removal").resolve()]
+    assert _with_files(read, files, request.output) == read
+    assert _with_files(["DefaultFace"], files, request.output) == ["DefaultFace", (models / "f.removal").resolve()]
+    # The layer being written is never its own input (a take's own root read through another parameter)
+    assert _with_files(read + [str(request.output)], files + [request.output.resolve()], request.output) == read
