@@ -20,10 +20,11 @@ arrays present before a network is allocated, so a file can never make facedyn a
 much more than its own size. Loading reads each array once, straight into an array of its
 own, hashing the bytes as they arrive, and the network takes those arrays over as its
 weights without a copy (built on torch's meta device, never initialized), so a load's peak
-is about the arrays themselves (benchmarks/bench_model_load_memory.py). Version 2 stores SHA-256 checksums of the metadata (its
-canonical JSON) and of the arrays (their table and bytes), verified on every load, so a
-damaged or edited file (flipped weight signs, a changed frame rate) is refused. They
-detect changes, they do not authenticate an author. Version 1 files, written before
+is about the arrays themselves (benchmarks/bench_model_load_memory.py); `describe_model`
+(`usdfacedyn inspect MODEL`) checks everything but builds no network and imports no torch.
+Version 2 stores SHA-256 checksums of the metadata (its canonical JSON) and of the arrays
+(their table and bytes), verified on every load, so a damaged or edited file (flipped
+weight signs, a changed frame rate) is refused. They detect changes, they do not authenticate an author. Version 1 files, written before
 checksums, still load, with a warning in `DynamicsModel.warnings` saying to re-save them.
 
 The metadata says what the model may be used on: its kind ("removal" for F, "synthesis"
@@ -49,7 +50,6 @@ import struct
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -121,6 +121,7 @@ class DynamicsModel:
 
     @property
     def spec(self) -> NetworkSpec:
+        """The network's shape (what feature_sizes and frame_bytes read, of a loaded model or a checked file)."""
         return self.network.spec
 
     @property
