@@ -42,6 +42,7 @@ SECTIONS = (
     ("bench_import", "Import memory", "Streaming import of long USD caches and OBJ sequences."),
     ("bench_import_skel", "UsdSkel import memory", "A UsdSkel rig's skinning baked one chunk at a time."),
     ("bench_train_memory", "Training memory", "Training through the on-disk feature store."),
+    ("bench_startup", "Start-up", "How long usdfacedyn takes to answer what needs no work, and `inspect MODEL` (issue 40: <= 0.3 s and <= 0.5 s)."),
     ("bench_model_load_memory", "Model load memory",
      "The peak of loading a model file beside the arrays it declares; the libraries' one-time first use kept apart."),
     ("bench_batch", "Farms", "usdfacedyn batch on a local Dask cluster."),
