@@ -4,7 +4,7 @@ The README's workflow for a real actor, as one resumable run within a stated bud
 
 1. `corpus/`: the family corpus simulated on the actor's rig with the recommended protocol
    (standard scale, tissue drawn per take, extra motions, foot-contact impacts, 0.1 mm of
-   tracking noise, the Live Link performances with `--data`; facedyn.usd.corpus.build_corpus);
+   tracking noise, the Live Link performances with `--data`; facedyn.processors.corpus_writer.build_corpus);
 2. `family.removal`: the family's F trained on it with the recommended flags (true skull and
    targets, skull accelerations, sample positions, batches of 2,000), for as many epochs of
    `--subsample` of the pairs as the budget leaves (`--epochs` gives them instead);
@@ -170,17 +170,15 @@ def corpus_description(params: dict) -> dict:
 def corpus_specs(rig, params: dict) -> list:
     """The recommended protocol's takes (README: synth --scale standard --randomize-tissue take --extra-motions --impacts
     --noise 0.01 --data DATA)."""
-    from facedyn.sim.corpus import check_data_folder, protocol, takes_matching
+    from facedyn.processors.corpus_writer import protocol_takes
 
-    check_data_folder(params["data"], params["corpus_scale"])
-    specs = protocol(rig, params["corpus_scale"], params["data"], seed=params["seed"], noise_cm=NOISE_CM, physics="tissue",
-                     randomize_tissue="take", extra_motions=True, impacts=True)
-    return takes_matching(specs, params["corpus_only"], params["corpus_scale"], "--corpus-only")
+    return protocol_takes(rig, params["corpus_scale"], params["data"], params["corpus_only"], "--corpus-only", seed=params["seed"],
+                          noise_cm=NOISE_CM, physics="tissue", randomize_tissue="take", extra_motions=True, impacts=True)
 
 
 def build_family_corpus(folder: Path, rig, specs: list, params: dict, progress: Progress) -> dict:
-    """Stage 1: the family corpus (facedyn.usd.corpus.build_corpus); its size for the record."""
-    from facedyn.usd.corpus import build_corpus
+    """Stage 1: the family corpus (facedyn.processors.corpus_writer.build_corpus); its size for the record."""
+    from facedyn.processors.corpus_writer import build_corpus
 
     index = build_corpus(folder, rig, specs, progress=progress, description=corpus_description(params), jobs=params["jobs"])
     return {"takes": len(index["takes"]), "frames": int(index["frames"])}

@@ -13,7 +13,7 @@ from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
 from facedyn.stabilize.api import stabilize
 from facedyn.usd import clips, layers
-from facedyn.usd.corpus import build_corpus
+from facedyn.processors.corpus_writer import build_corpus
 from facedyn.usd.take import read_take
 
 
