@@ -79,7 +79,7 @@ class Demo:
         return value
 
     def run(self) -> dict:
-        from facedyn.processors.simulate import load_rig
+        from facedyn.processors.corpus_writer import load_rig
         from facedyn.sim.corpus import protocol
 
         self.output.mkdir(parents=True, exist_ok=True)

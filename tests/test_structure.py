@@ -8,9 +8,9 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "facedyn"
 PXR_ALLOWED = ("facedyn.usd", "facedyn.processors")
-# The only modules outside facedyn.sim that import it: the corpus simulator (`simulate`, and on Dask),
-# the corpus writer and the demo. Everything that reads a corpus, a rig or a take does so without the physics.
-SIMULATOR_USERS = {"facedyn.processors.simulate", "facedyn.processors.corpus_writer", "facedyn.batch.corpus", "facedyn.demo"}
+# The only modules outside facedyn.sim that import it: the corpus writer (which `simulate` and `calibrate` build
+# corpora with), the corpus simulator on Dask and the demo. Whatever reads a corpus, a rig or a take does so without the physics.
+SIMULATOR_USERS = {"facedyn.processors.corpus_writer", "facedyn.batch.corpus", "facedyn.demo"}
 
 
 def _modules() -> dict[str, Path]:
@@ -112,5 +112,41 @@ def test_usd_imports_nothing_from_the_simulator():
 def test_only_the_corpus_simulator_the_writer_and_the_demo_import_the_simulator():
     users = {name for name, targets in _graph().items() if not _in_simulator(name) and any(map(_in_simulator, targets))}
     assert users <= SIMULATOR_USERS, sorted(users - SIMULATOR_USERS)
-    assert "facedyn.processors.simulate" in users  # the check sees imports inside functions too
+    assert "facedyn.demo" in users  # the check sees imports inside functions too
 
+
+def test_no_processor_module_imports_another():
+    graph, processors = _graph(), _processor_modules()
+    assert len(processors) > 10 and all(name in graph for name in processors), sorted(processors - set(graph))
+    arrows = sorted((name, other) for name in processors for other in graph[name] if other in processors and other != name)
+    assert arrows == []
+
+
+def test_library_modules_of_the_processors_declare_no_processor():
+    """Shared step code lives in modules that are not commands, so no processor needs another."""
+    modules, processors = _modules(), _processor_modules()
+    libraries = [name for name in modules if name.startswith("facedyn.processors.") and name not in processors
+                 and name != "facedyn.processors.base"]
+    assert libraries and [name for name in libraries if _declares_a_processor(modules[name])] == []
+
+
+ROLE_READERS = {"TakeFrames", "read_take_below", "stage_below"}  # (path, role_name, ...): the take below a role
+
+
+def test_roles_are_named_by_the_role_tables_constants():
+    """A role given to a reader, a Writes or a FaceAttributes is a constant of facedyn.performance, never a bare string."""
+    from facedyn.performance import BUILTIN_ROLES
+
+    role_names, found = {role.name for role in BUILTIN_ROLES}, []
+    for name, path in _modules().items():
+        if not name.startswith(("facedyn.processors", "facedyn.usd", "facedyn.batch")):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.Call):
+                continue
+            callee = node.func.id if isinstance(node.func, ast.Name) else getattr(node.func, "attr", "")
+            values = [k.value for k in node.keywords if k.arg in ("role", "role_name")]
+            if callee in ROLE_READERS and len(node.args) > 1:
+                values.append(node.args[1])
+            found += [f"{name}:{node.lineno}" for v in values for c in ast.walk(v) if isinstance(c, ast.Constant) and c.value in role_names]
+    assert found == []

@@ -76,7 +76,7 @@ class CalibrateProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.performance import skull_frame_id
+        from facedyn.performance import QUASISTATIC, skull_frame_id
         from facedyn.processors.training_inputs import take_name, take_skull_frame
         from facedyn.usd.errors import TakeError
         from facedyn.usd.frames import TakeFrames
@@ -92,7 +92,7 @@ class CalibrateProcessor(Processor):
         rig = read_blendshape_rig(params["rig"])
         frame = skull_frame_id(rig.neutral, rig.topology)
         for root in roots:
-            head = TakeFrames(root, "quasistatic").head
+            head = TakeFrames(root, QUASISTATIC).head
             if head.skull_orient is None:
                 raise TakeError(f"{root}: no solved skull; stabilize the session's takes first (stabilize --actor ACTOR)")
             if head.topology.fingerprint() != rig.topology.fingerprint():
@@ -211,8 +211,7 @@ def fit_response(roots: list, family: Path, output: Path, params: dict, progress
     from facedyn.dynamics.modelfile import load_model, save_model
     from facedyn.dynamics.response import RIDGES, fit_linear_response, response_template
     from facedyn.dynamics.training import TrainingSequence
-    from facedyn.processors.train_synthesis import check_session_lengths
-    from facedyn.processors.training_inputs import load_takes
+    from facedyn.processors.training_inputs import check_session_lengths, load_takes
 
     takes = load_takes(roots, {"include": "", "exclude": "", "validation": "", "skull": "take"}, progress)
     f = load_model(family, topology=takes[0][1].topology, fps=takes[0][1].fps)

@@ -20,6 +20,19 @@ from facedyn.usd.corpus import (complete_take, corpus_folder, rig_fingerprint, s
                                 write_take_atomically)
 
 
+def load_rig(path: Path | None, actor_seed: int | None = None):
+    """The built-in face or a USD blend-shape rig, optionally turned into another actor."""
+    if path is None:
+        from facedyn.sim.default_face import default_face
+
+        rig = default_face()
+    else:
+        from facedyn.usd.rig import read_blendshape_rig
+
+        rig = read_blendshape_rig(path)
+    return rig if actor_seed is None else rig.make_actor(seed=actor_seed)
+
+
 def protocol_takes(rig: FaceRig, scale: str, data: Path | None, only: str = "", only_flag: str = "--only", **options) -> list[TakeSpec]:
     """The protocol's takes (facedyn.sim.corpus.protocol with `options`) named by the glob `only`; a
     UsageError, naming `only_flag` or --data, for a data folder that lacks the protocol's files or a

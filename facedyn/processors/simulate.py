@@ -44,7 +44,7 @@ class SimulateProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.processors.corpus_writer import protocol_takes
+        from facedyn.processors.corpus_writer import load_rig, protocol_takes
 
         params = request.params
         band = soft_hz_band(params["soft_hz"])
@@ -96,16 +96,3 @@ def soft_hz_band(text: str) -> tuple[float, float] | None:
     if band is None or not (0 < band[0] <= band[1] < 1000):
         raise UsageError(f"--soft-hz {text!r}: expected a band of frequencies LOW-HIGH in Hz with 0 < LOW <= HIGH, e.g. 7.5-9")
     return band
-
-
-def load_rig(path: Path | None, actor_seed: int | None = None):
-    """The built-in face or a USD blend-shape rig, optionally turned into another actor."""
-    if path is None:
-        from facedyn.sim.default_face import default_face
-
-        rig = default_face()
-    else:
-        from facedyn.usd.rig import read_blendshape_rig
-
-        rig = read_blendshape_rig(path)
-    return rig if actor_seed is None else rig.make_actor(seed=actor_seed)

@@ -34,6 +34,7 @@ import numpy as np
 
 import facedyn
 from facedyn.errors import FacedynError
+from facedyn.performance import CAPTURED, QUASISTATIC, STABILIZED
 from facedyn.rig import FaceRig, alignment_vertices
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
@@ -55,7 +56,7 @@ def write_simulated_take(folder: Path, take, rig: FaceRig) -> dict:
     timing = Timing(take.fps, take.fps, float(frames[0]), float(frames[-1]))
     spec = {k: v for k, v in asdict(take.spec).items() if v is not None}
     face = schema.FaceAttributes(
-        role="captured", rest_points=rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices,
+        role=CAPTURED, rest_points=rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices,
         alignment_vertices=alignment_vertices(rig),
     )
     capture = write_layer(
@@ -67,12 +68,12 @@ def write_simulated_take(folder: Path, take, rig: FaceRig) -> dict:
     skull = write_layer(
         folder / "truth" / "skull.usdc",
         LayerContent(frames=frames, points=take.captured, skull_translate=take.skull_translate, skull_orient=take.skull_orient,
-                     face=schema.FaceAttributes(role="stabilized"), skull=schema.SkullAttributes(solver="truth")),
+                     face=schema.FaceAttributes(role=STABILIZED), skull=schema.SkullAttributes(solver="truth")),
         timing, _provenance("simulate-truth-skull", spec, frames, _layers(capture)),
     )
     quasistatic = write_layer(
         folder / "truth" / "quasistatic.usdc",
-        LayerContent(frames=frames, points=take.quasistatic, offsets=take.offsets, face=schema.FaceAttributes(role="quasistatic")),
+        LayerContent(frames=frames, points=take.quasistatic, offsets=take.offsets, face=schema.FaceAttributes(role=QUASISTATIC)),
         timing, _provenance("simulate-truth-quasistatic", spec, frames, _layers(skull, capture)),
     )
     write_take_root(folder / "take.usda", [capture], timing)
