@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from pxr import Usd
 
-from facedyn.cli import main
+from facedyn.cli import build_parser, main
 from facedyn.usd.take import read_take
 
 from usd_fixtures import grid_mesh, write_mesh_cache
@@ -186,6 +186,8 @@ def test_version_list_env(capsys):
     listed = [line.split()[0] for line in out.splitlines()]
     assert code == 0 and {"import", "stabilize", "remove", "synthesize", "retarget", "preview", "simulate", "synth", "train-removal",
                           "train-synthesis", "demo"} <= set(listed)
+    commands = build_parser(["--help"])._subparsers._group_actions[0].choices
+    assert sorted(listed) == sorted(commands)  # every command, the tools (inspect, validate, layers, batch, env, list) included
     code, out, _ = run(["env"], capsys)
     assert code == 0 and out.startswith("export PXR_PLUGINPATH_NAME=")
 
