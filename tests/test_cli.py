@@ -55,9 +55,20 @@ def test_frames_json_dry_run_and_attach(tmp_path, grid_cache, capsys):
     assert code == 0 and report["frame_count"] == 2 and report["frame_range"] == [1002.0, 1003.0]
     perf, _ = read_take(tmp_path / "take.usda")
     np.testing.assert_allclose(perf.points, frames[1:3])
-    # An import makes or extends its own root: --attach is refused, naming --root.
+    # An import makes or extends its own root (--root): it does not offer --attach, and a script that passes one is refused.
+    code, out, _ = run(["import", "--help"], capsys)
+    assert code == 0 and "--attach" not in out and "--root" in out
     code, _, err = run(["import", cache, "-o", tmp_path / "again.usdc", "--attach", tmp_path / "take.usda", "-q"], capsys)
-    assert code == 2 and "--root" in err and not (tmp_path / "again.usdc").exists()
+    assert code == 2 and "--attach" in err and not (tmp_path / "again.usdc").exists()
+    from facedyn.errors import UsageError
+    from facedyn.processors import registry
+    from facedyn.processors.base import Request
+    from facedyn.processors.runner import execute
+    from facedyn.progress import Progress
+
+    with pytest.raises(UsageError, match="takes no --attach"):
+        execute(registry.load("import"), Request([cache], tmp_path / "again.usdc", attach=tmp_path / "take.usda"), Progress.silent())
+    assert not (tmp_path / "again.usdc").exists()
 
 
 def test_units_and_up_axis_are_made_canonical(tmp_path, capsys):

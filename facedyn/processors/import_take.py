@@ -44,7 +44,7 @@ class ImportProcessor(Processor):
     version = "1"
     summary = "turn a time-sampled USD mesh or an OBJ sequence into a canonical take (capture layer + take.usda)"
     reads = Reads("sources", metavar="SRC", help="a USD file with an animated mesh, or OBJ files (a folder, a list or a quoted pattern)")
-    writes = Writes("layer", role=CAPTURED, help="the capture layer to write (.usdc); its take root is created beside it")
+    writes = Writes("layer", role=CAPTURED, attach=False, help="the capture layer to write (.usdc); its take root is created beside it")
     parameters = (
         Parameter("mesh", str, "", "prim path of the animated Mesh in a USD source (default: the only one)"),
         Parameter("fps", float, 0.0, "OBJ: the sequence's frame rate (required); USD: resample the capture to this rate "
@@ -65,8 +65,6 @@ class ImportProcessor(Processor):
         from facedyn.io.obj import ObjFrames
         from facedyn.usd.source import open_mesh_source
 
-        if request.attach is not None:
-            raise UsageError("import creates or extends its own take root; name it with --root, not --attach")
         source = _source(request)
         root = self.take_root(request)
         _check_flags_apply(source, request.params)
