@@ -10,7 +10,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "facedyn"
 PXR_ALLOWED = ("facedyn.usd", "facedyn.processors")
 # The only modules outside facedyn.sim that import it: the corpus writer (which `simulate` and `calibrate` build
 # corpora with), the corpus simulator on Dask and the demo. Whatever reads a corpus, a rig or a take does so without the physics.
-SIMULATOR_USERS = {"facedyn.processors.corpus_writer", "facedyn.batch.corpus", "facedyn.processors.demo"}
+SIMULATOR_USERS = {"facedyn.processors.corpus_writer", "facedyn.batch.simulate", "facedyn.processors.demo"}
 
 
 def _modules() -> dict[str, Path]:
