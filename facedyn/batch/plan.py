@@ -133,11 +133,11 @@ def plan_take(name: str, capture: Path, output: Path, steps: tuple[str, ...], mo
     for step in steps:
         extra: list[str] = []
         inputs: list[Path] = []
-        attach = ["--attach", root]
-        written = declaration(step).writes.role
-        out, source = folder / layer_name(step, motion_label(models.skull_motion) if written == SYNTHESIZED else ""), root
-        if written == CAPTURED:  # the step that makes the take root from the capture
-            source, attach, inputs = str(capture), [], [capture]
+        writes = declaration(step).writes
+        attach = ["--attach", root] if writes.attach else []  # import makes the take root the later steps attach to
+        out, source = folder / layer_name(step, motion_label(models.skull_motion) if writes.role == SYNTHESIZED else ""), root
+        if writes.role == CAPTURED:  # the step that reads the capture
+            source, inputs = str(capture), [capture]
         elif step == "stabilize" and models.actor is not None:
             extra, inputs = [flag(step, "actor"), str(models.actor)], [models.actor]
         elif step == "remove":
