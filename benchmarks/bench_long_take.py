@@ -60,7 +60,7 @@ def short_take(folder: Path, fps: float, train: bool = True):
     from facedyn.cli import main
     from facedyn.sim.corpus import TakeSpec
     from facedyn.sim.default_face import default_face
-    from facedyn.usd.corpus import build_corpus
+    from facedyn.processors.corpus_writer import build_corpus
 
     build_corpus(folder / "corpus", default_face(), [TakeSpec("base", "walk", "smile", duration_s=3.0, seed=1, fps=fps)])
     models = folder / "models"

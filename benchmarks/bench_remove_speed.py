@@ -45,7 +45,7 @@ from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.geometry import quaternion
 from facedyn.kernels import runtime
 from facedyn.performance import Topology
-from facedyn.processors.remove import mean_removal
+from facedyn.processors.model_steps import mean_removal
 
 ROWS, COLS, FPS, SAMPLES = 148, 76, 120.0, 344
 ICT_RIG = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"

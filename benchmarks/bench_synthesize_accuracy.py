@@ -54,7 +54,7 @@ from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
 from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
 from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
 from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
-from facedyn.processors.simulate import load_rig
+from facedyn.processors.corpus_writer import load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, TakeSpec, held_expressions, simulate_take, simulate_takes
 from facedyn.sim.tissue import TissueParams, simulate

@@ -38,7 +38,7 @@ def peak_rss_mib() -> float:
 def build(folder: Path, count: int, seconds: float) -> None:
     from facedyn.sim.corpus import TakeSpec
     from facedyn.sim.default_face import default_face
-    from facedyn.usd.corpus import build_corpus
+    from facedyn.processors.corpus_writer import build_corpus
 
     specs = [TakeSpec(f"take{i:03d}", MOTIONS[i % len(MOTIONS)], ("smile", "jaw_open", None)[i % 3], duration_s=seconds, seed=i)
              for i in range(count)]

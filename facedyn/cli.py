@@ -3,14 +3,16 @@
     usdfacedyn PROCESSOR INPUT... -o OUT  one subcommand per registered processor (import,
                                           stabilize, remove, synthesize, retarget, preview,
                                           synth, train-removal, train-synthesis, demo, ...)
-    usdfacedyn list                       processors and what they do
+    usdfacedyn list                       every command and what it does
     usdfacedyn inspect TAKE|MODEL         layer stack, timing, roles, staleness, provenance
     usdfacedyn validate TAKE              USD's validators plus facedyn's own
     usdfacedyn layers TAKE                list, mute, unmute, detach or reorder a take's layers
     usdfacedyn batch CAPTURES... -o DIR   import ... preview over many captures on Dask
     usdfacedyn env                        the PXR_PLUGINPATH_NAME line for usdview / DCCs
 
-Every processor's flags are generated from its declaration (facedyn.processors.base).
+Every processor's flags are generated from its declaration (facedyn.processors.base); the
+commands that look at results (list, env, inspect, validate, layers) and batch are declared
+in TOOLS below, so `list` shows every command.
 Exit codes: 0 ok, 1 failure (bad input, failed validation), 2 usage error.
 """
 from __future__ import annotations
@@ -18,7 +20,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from facedyn.processors.commandline import EXIT_FAILURE, EXIT_OK, Parser, add_processor_parser, common_flags, run_guarded
 
@@ -73,23 +77,33 @@ def _tool(commands, name: str, help_text: str, handler, operand: tuple[str, str]
     return p
 
 
-def _add_tools(commands) -> None:
-    """The commands that look at what processors made (they write nothing but layer edits)."""
-    _tool(commands, "list", "list the registered processors", _cmd_list, json_help="print JSON")
-    _tool(commands, "env", "print the shell lines that make usdview and DCCs load facedyn's plugins", _cmd_env)
-    _tool(commands, "inspect", "show a take's layer stack, roles, staleness and provenance, or a model file's metadata",
-          _cmd_inspect, operand=("path", "TAKE|LAYER|MODEL"), json_help="print JSON")
-    _tool(commands, "validate", "run USD's validators and facedyn's own on a take", _cmd_validate,
-          operand=("take", "TAKE"), json_help="print the findings as JSON")
+@dataclass(frozen=True)
+class Tool:
+    """A command that is not a processor (it looks at what processors made, edits a take's stack, or runs
+    processors in bulk), declared as processors are: its name, what it does, and how its arguments are added."""
 
-    p = commands.add_parser("batch", help="run a pipeline of steps over many captures on a Dask cluster (local by default)")
+    name: str
+    summary: str
+    add: Callable  # (commands, tool) -> the command's parser, its handler set
+
+
+def _add_tools(commands) -> None:
+    for tool in TOOLS:
+        tool.add(commands, tool)
+
+
+def _add_batch(commands, tool: Tool):
     from facedyn.batch.command import add_batch_arguments, run_batch
 
+    p = commands.add_parser(tool.name, help=tool.summary)
     add_batch_arguments(p)
     p.add_argument("--debug", action="store_true", help=argparse.SUPPRESS)
     p.set_defaults(handler=run_batch)
+    return p
 
-    p = commands.add_parser("layers", help="list a take's layers (roles, staleness), or mute, unmute, detach or reorder one on disk",
+
+def _add_layers(commands, tool: Tool):
+    p = commands.add_parser(tool.name, help=tool.summary,
                             description="Edits the take root atomically under its lock; the layer files themselves are never touched.")
     p.add_argument("take", type=Path, metavar="TAKE")
     action = p.add_mutually_exclusive_group()
@@ -101,6 +115,7 @@ def _add_tools(commands) -> None:
     p.add_argument("--below", metavar="OTHER", help="with --move: place LAYER just below OTHER")
     common_flags(p, "print the stack as JSON")
     p.set_defaults(handler=_cmd_layers)
+    return p
 
 
 def _cmd_list(args) -> int:
@@ -113,7 +128,10 @@ def _cmd_list(args) -> int:
             summary, writes = processor.summary, processor.writes.what + (f" ({processor.writes.role})" if processor.writes.role else "")
         except Exception as exc:  # list what is there even when one plugin is broken
             summary, writes = f"(failed to load: {exc})", "?"
-        rows.append({"name": name, "entry_point": entry_point.value, "writes": writes, "summary": summary})
+        rows.append({"name": name, "kind": "processor", "entry_point": entry_point.value, "writes": writes, "summary": summary})
+    rows += [{"name": tool.name, "kind": "tool", "entry_point": "facedyn.cli", "writes": "nothing",
+              "summary": tool.summary} for tool in TOOLS if tool.name not in registry.available()]
+    rows.sort(key=lambda row: row["name"])
     if args.json:
         print(json.dumps(rows, indent=2))
     else:
@@ -194,6 +212,24 @@ def _cmd_validate(args) -> int:
             print(f"{finding.severity.upper()} {finding.validator}: {finding.message}")
         print(f"{args.take}: {len(errors)} error(s), {len(findings) - len(errors)} warning(s)")
     return EXIT_FAILURE if errors else EXIT_OK
+
+
+TOOLS = (
+    Tool("list", "list every command: the registered processors and these tools",
+         lambda commands, tool: _tool(commands, tool.name, tool.summary, _cmd_list, json_help="print JSON")),
+    Tool("env", "print the shell lines that make usdview and DCCs load facedyn's plugins",
+         lambda commands, tool: _tool(commands, tool.name, tool.summary, _cmd_env)),
+    Tool("inspect", "show a take's layer stack, roles, staleness and provenance, or a model file's metadata",
+         lambda commands, tool: _tool(commands, tool.name, tool.summary, _cmd_inspect, operand=("path", "TAKE|LAYER|MODEL"),
+                                      json_help="print JSON")),
+    Tool("validate", "run USD's validators and facedyn's own on a take",
+         lambda commands, tool: _tool(commands, tool.name, tool.summary, _cmd_validate, operand=("take", "TAKE"),
+                                      json_help="print the findings as JSON")),
+    Tool("layers", "list a take's layers (roles, staleness), or mute, unmute, detach or reorder one on disk",
+         _add_layers),
+    Tool("batch", "run a pipeline of steps over many captures on a Dask cluster (local by default)", _add_batch),
+)
+"""The commands that are not processors, each declared once: `list` and `--help` show them beside the processors."""
 
 
 def _version_text() -> str:

@@ -42,13 +42,17 @@ class Role:
     reads: str | None = None  # the role that must lie below a layer of this role (what it is computed from)
 
 
+CAPTURED, STABILIZED, QUASISTATIC = "captured", "stabilized", "quasistatic"
+SYNTHESIZED, RETARGETED, PREVIEW = "synthesized", "retargeted", "preview"
+"""The built-in roles' names: code names a role through these constants, never a bare string."""
+
 BUILTIN_ROLES = (
-    Role("captured", 0, "capture"),
-    Role("stabilized", 10, "stabilized layers", reads="captured"),
-    Role("quasistatic", 20, "quasistatic layers", reads="stabilized"),
-    Role("synthesized", 30, "synthesized layers", variants=True, reads="quasistatic"),
-    Role("retargeted", 30, "retargeted layers", variants=True, reads="quasistatic"),
-    Role("preview", 40, "heat map", variants=True, face_role=False),
+    Role(CAPTURED, 0, "capture"),  # the base role: the capture every other layer is computed over; it sets the take's frames
+    Role(STABILIZED, 10, "stabilized layers", reads=CAPTURED),
+    Role(QUASISTATIC, 20, "quasistatic layers", reads=STABILIZED),
+    Role(SYNTHESIZED, 30, "synthesized layers", variants=True, reads=QUASISTATIC),
+    Role(RETARGETED, 30, "retargeted layers", variants=True, reads=QUASISTATIC),
+    Role(PREVIEW, 40, "heat map", variants=True, face_role=False),
 )
 ROLE_GROUP = "facedyn.roles"
 """Entry-point group through which third parties add roles (each entry point a `Role`)."""

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from pxr import Usd
 
-from facedyn.cli import main
+from facedyn.cli import build_parser, main
 from facedyn.usd.take import read_take
 
 from usd_fixtures import grid_mesh, write_mesh_cache
@@ -55,9 +55,20 @@ def test_frames_json_dry_run_and_attach(tmp_path, grid_cache, capsys):
     assert code == 0 and report["frame_count"] == 2 and report["frame_range"] == [1002.0, 1003.0]
     perf, _ = read_take(tmp_path / "take.usda")
     np.testing.assert_allclose(perf.points, frames[1:3])
-    # An import makes or extends its own root: --attach is refused, naming --root.
+    # An import makes or extends its own root (--root): it does not offer --attach, and a script that passes one is refused.
+    code, out, _ = run(["import", "--help"], capsys)
+    assert code == 0 and "--attach" not in out and "--root" in out
     code, _, err = run(["import", cache, "-o", tmp_path / "again.usdc", "--attach", tmp_path / "take.usda", "-q"], capsys)
-    assert code == 2 and "--root" in err and not (tmp_path / "again.usdc").exists()
+    assert code == 2 and "--attach" in err and not (tmp_path / "again.usdc").exists()
+    from facedyn.errors import UsageError
+    from facedyn.processors import registry
+    from facedyn.processors.base import Request
+    from facedyn.processors.runner import execute
+    from facedyn.progress import Progress
+
+    with pytest.raises(UsageError, match="takes no --attach"):
+        execute(registry.load("import"), Request([cache], tmp_path / "again.usdc", attach=tmp_path / "take.usda"), Progress.silent())
+    assert not (tmp_path / "again.usdc").exists()
 
 
 def test_units_and_up_axis_are_made_canonical(tmp_path, capsys):
@@ -186,6 +197,8 @@ def test_version_list_env(capsys):
     listed = [line.split()[0] for line in out.splitlines()]
     assert code == 0 and {"import", "stabilize", "remove", "synthesize", "retarget", "preview", "simulate", "synth", "train-removal",
                           "train-synthesis", "demo"} <= set(listed)
+    commands = build_parser(["--help"])._subparsers._group_actions[0].choices
+    assert sorted(listed) == sorted(commands)  # every command, the tools (inspect, validate, layers, batch, env, list) included
     code, out, _ = run(["env"], capsys)
     assert code == 0 and out.startswith("export PXR_PLUGINPATH_NAME=")
 

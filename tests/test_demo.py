@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from facedyn.cli import main
-from facedyn.demo import format_summary
+from facedyn.processors.demo import format_summary
 from facedyn.dynamics.modelfile import load_model
 from facedyn.dynamics.removal import SAMPLE_POSITIONS
 from facedyn.dynamics.skull_motion import NAMED

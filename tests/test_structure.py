@@ -1,11 +1,16 @@
-"""The package's shape: no import loops, pxr only at the edges, algorithms import without USD."""
+"""The package's shape: no import loops, pxr only at the edges, algorithms import without USD,
+the simulator off the production path, and processors that share code through libraries, not each other."""
 import ast
+import configparser
 import subprocess
 import sys
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "facedyn"
 PXR_ALLOWED = ("facedyn.usd", "facedyn.processors")
+# The only modules outside facedyn.sim that import it: the corpus writer (which `simulate` and `calibrate` build
+# corpora with), the corpus simulator on Dask and the demo. Whatever reads a corpus, a rig or a take does so without the physics.
+SIMULATOR_USERS = {"facedyn.processors.corpus_writer", "facedyn.batch.simulate", "facedyn.processors.demo"}
 
 
 def _modules() -> dict[str, Path]:
@@ -37,9 +42,35 @@ def _imports(path: Path, modules: dict[str, Path]) -> set[str]:
     return targets
 
 
-def test_no_import_loops():
+def _graph() -> dict[str, set[str]]:
     modules = _modules()
-    graph = {name: _imports(path, modules) - {name, "pxr"} for name, path in modules.items()}
+    return {name: _imports(path, modules) - {name, "pxr"} for name, path in modules.items()}
+
+
+def _in_simulator(name: str) -> bool:
+    return name == "facedyn.sim" or name.startswith("facedyn.sim.")
+
+
+def _processor_modules() -> set[str]:
+    """The modules the facedyn.processors entry points (setup.cfg) name: one declared command each."""
+    config = configparser.ConfigParser()
+    config.read(PACKAGE.parent / "setup.cfg")
+    lines = config["options.entry_points"]["facedyn.processors"].strip().splitlines()
+    return {line.partition("=")[2].strip().partition(":")[0] for line in lines if line.strip()}
+
+
+def _declares_a_processor(path: Path) -> bool:
+    """Whether the module defines a class deriving from Processor (or from another *Processor class)."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ClassDef):
+            bases = [b.id if isinstance(b, ast.Name) else getattr(b, "attr", "") for b in node.bases]
+            if any(base == "Processor" or base.endswith("Processor") for base in bases):
+                return True
+    return False
+
+
+def test_no_import_loops():
+    graph = _graph()
     state: dict[str, int] = {}
     cycles = []
 
@@ -70,3 +101,52 @@ def test_algorithm_packages_import_without_usd():
             "facedyn.io.bvh, facedyn.sim.tissue\nprint('ok')")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0 and "ok" in result.stdout, result.stderr
+
+
+def test_usd_imports_nothing_from_the_simulator():
+    arrows = sorted((name, other) for name, targets in _graph().items() if name.startswith("facedyn.usd")
+                    for other in targets if _in_simulator(other))
+    assert arrows == []
+
+
+def test_only_the_corpus_simulator_the_writer_and_the_demo_import_the_simulator():
+    users = {name for name, targets in _graph().items() if not _in_simulator(name) and any(map(_in_simulator, targets))}
+    assert users <= SIMULATOR_USERS, sorted(users - SIMULATOR_USERS)
+    assert "facedyn.processors.demo" in users  # the check sees imports inside functions too
+
+
+def test_no_processor_module_imports_another():
+    graph, processors = _graph(), _processor_modules()
+    assert len(processors) > 10 and all(name in graph for name in processors), sorted(processors - set(graph))
+    arrows = sorted((name, other) for name in processors for other in graph[name] if other in processors and other != name)
+    assert arrows == []
+
+
+def test_library_modules_of_the_processors_declare_no_processor():
+    """Shared step code lives in modules that are not commands, so no processor needs another."""
+    modules, processors = _modules(), _processor_modules()
+    libraries = [name for name in modules if name.startswith("facedyn.processors.") and name not in processors
+                 and name != "facedyn.processors.base"]
+    assert libraries and [name for name in libraries if _declares_a_processor(modules[name])] == []
+
+
+ROLE_READERS = {"TakeFrames", "read_take_below", "stage_below"}  # (path, role_name, ...): the take below a role
+
+
+def test_roles_are_named_by_the_role_tables_constants():
+    """A role given to a reader, a Writes or a FaceAttributes is a constant of facedyn.performance, never a bare string."""
+    from facedyn.performance import BUILTIN_ROLES
+
+    role_names, found = {role.name for role in BUILTIN_ROLES}, []
+    for name, path in _modules().items():
+        if not name.startswith(("facedyn.processors", "facedyn.usd", "facedyn.batch")):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.Call):
+                continue
+            callee = node.func.id if isinstance(node.func, ast.Name) else getattr(node.func, "attr", "")
+            values = [k.value for k in node.keywords if k.arg in ("role", "role_name")]
+            if callee in ROLE_READERS and len(node.args) > 1:
+                values.append(node.args[1])
+            found += [f"{name}:{node.lineno}" for v in values for c in ast.walk(v) if isinstance(c, ast.Constant) and c.value in role_names]
+    assert found == []

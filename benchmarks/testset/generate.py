@@ -37,7 +37,7 @@ import numpy as np
 
 from facedyn.geometry import quaternion
 from facedyn.sim.noise import TrackerNoise, add_tracker_noise
-from facedyn.sim.rig import FaceRig
+from facedyn.rig import FaceRig
 from testset.actors import FPS, SUBSTEPS, ActorSpec, session_takes, test_takes
 from testset.takes import LEAD_S, TakeRecipe, expression_weights, skull_trajectory
 from testset.tissue import Drive, MujocoTissue, TissueParams

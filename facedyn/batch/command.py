@@ -1,11 +1,13 @@
 """`usdfacedyn batch`: many captures through the pipeline's steps on a Dask cluster.
 
     usdfacedyn batch CAPTURES... -o OUTDIR --steps import,stabilize,remove,synthesize,preview
-        [--actor A] [--model F] [--synthesis-model H] [--skull-motion M]
+        [--actor A] [--removal-model F] [--synthesis-model H] [--skull-motion M]
         [--workers N | --scheduler tcp://HOST:PORT] [--force] [--json]
 
 Each capture (a mesh cache, a glob pattern, or a shot list: a .txt file with one path per
-line) becomes OUTDIR/<name>/ with its take.usda. Exit code 0 when every take succeeded, 1
+line) becomes OUTDIR/<name>/ with its take.usda. Each step is the processor of that name with
+the flags it declares: `--removal-model` is remove's `--model`, `--synthesis-model` synthesize's
+(`--model` is the old spelling of `--removal-model`, kept as a deprecated alias). Exit code 0 when every take succeeded, 1
 when any failed (the others still ran), 2 for a usage error.
 """
 from __future__ import annotations
@@ -27,7 +29,9 @@ def add_batch_arguments(parser) -> None:
     parser.add_argument("-o", "--output", type=Path, required=True, metavar="OUTDIR", help="folder of the takes (OUTDIR/<name>/take.usda)")
     parser.add_argument("--steps", default=",".join(STEPS), help=f"comma-separated steps, in order (default: {','.join(STEPS)})")
     parser.add_argument("--actor", metavar="A", help="an actor asset (usdfacedyn actor): stabilize puts every take in its skull frame")
-    parser.add_argument("--model", type=Path, metavar="F", help="removal model for the remove step")
+    parser.add_argument("--removal-model", type=Path, metavar="F", help="removal model for the remove step (its --model): network F, "
+                        "an actor's linear response or a blend")
+    parser.add_argument("--model", type=Path, metavar="F", help="deprecated alias of --removal-model")
     parser.add_argument("--synthesis-model", type=Path, metavar="H", help="synthesis model for the synthesize step")
     parser.add_argument("--skull-motion", metavar="M", help="new skull motion for synthesize: BVH, stabilized take, or walk|run|hop|still|platform:9hz")
     where = parser.add_mutually_exclusive_group()
@@ -39,8 +43,14 @@ def add_batch_arguments(parser) -> None:
 
 
 def models_from(args) -> Models:
+    removal = args.removal_model
+    if args.model is not None:
+        if removal is not None:
+            raise UsageError("--model is the old name of --removal-model: give one of them")
+        print("usdfacedyn: batch --model is deprecated and will be removed; use --removal-model (the same model)", file=sys.stderr)
+        removal = args.model
     return Models(
-        removal=Path(args.model) if args.model else None,
+        removal=Path(removal) if removal else None,
         synthesis=Path(args.synthesis_model) if args.synthesis_model else None,
         skull_motion=args.skull_motion,
         actor=Path(args.actor) if args.actor else None,

@@ -1,16 +1,25 @@
-"""What a batch will do: the captures, their take names, and each step's command line."""
+"""What a batch will do: the captures, their take names, and each step's command line.
+
+The steps are processors, and their command lines are built from the processors'
+declarations (facedyn.processors.base): each step's order is its role's rank, its layer is
+named after its role, and every flag it is given is one it declares, so a processor's flag
+renamed or dropped is an error here, not a batch that runs with the wrong flags.
+"""
 from __future__ import annotations
 
 import glob
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
-from facedyn.errors import UsageError
+from facedyn.errors import FacedynError, UsageError
 from facedyn.io.errors import InputError
 from facedyn.io.files import check_not_special, read_lines
+from facedyn.performance import CAPTURED, PREVIEW, SYNTHESIZED, role
 
-STEPS = ("import", "stabilize", "remove", "synthesize", "preview")
+STEPS = ("import", "stabilize", "remove", "synthesize", "preview")  # the layer processors a capture goes through
 SHOT_LIST_SUFFIXES = (".txt", ".list")
+LAYER_NAMES = {CAPTURED: "capture.usdc", PREVIEW: "take.preview.usdc"}  # else <role>.usdc (a variant: <role>.<label>usdc)
 
 
 @dataclass(frozen=True)
@@ -39,13 +48,43 @@ class StepPlan:
         return self.folder / "take.usda"
 
 
+@lru_cache(maxsize=None)
+def declaration(step: str):
+    """The processor that runs `step` (loaded from the registry: its module only, no heavy library)."""
+    from facedyn.processors import registry
+
+    processor = registry.load(step)
+    if processor.writes.what != "layer" or processor.writes.role is None:
+        raise FacedynError(f"batch step {step!r}: the processor writes {processor.writes.what}, a batch step writes a layer of a role")
+    return processor
+
+
+def step_order(steps: tuple[str, ...]) -> tuple[str, ...]:
+    """`steps` in pipeline order: by the rank of the role each step's processor writes."""
+    return tuple(sorted(steps, key=lambda step: role(declaration(step).writes.role).rank))
+
+
+def flag(step: str, parameter: str) -> str:
+    """The command-line flag of one of the step's declared parameters; a FacedynError if the processor declares none."""
+    declared = {p.name: p for p in declaration(step).parameters}
+    if parameter not in declared:
+        raise FacedynError(f"batch step {step!r}: the {step} processor declares no {parameter!r} parameter")
+    return declared[parameter].flag
+
+
+def layer_name(step: str, label: str = "") -> str:
+    """The file a step's layer is written to: named after the role its processor writes."""
+    written = declaration(step).writes.role
+    return LAYER_NAMES.get(written) or f"{written}.{label}usdc"
+
+
 def parse_steps(text: str) -> tuple[str, ...]:
     """'import,stabilize' -> the steps, checked and in pipeline order."""
     steps = tuple(s.strip() for s in text.split(",") if s.strip())
     unknown = [s for s in steps if s not in STEPS]
     if unknown or not steps:
         raise UsageError(f"--steps: unknown step(s) {unknown or [text]}; choose from {','.join(STEPS)}")
-    if len(set(steps)) != len(steps) or list(steps) != sorted(steps, key=STEPS.index):
+    if len(set(steps)) != len(steps) or steps != step_order(steps):
         raise UsageError(f"--steps: give each step once, in pipeline order ({','.join(STEPS)}), got {text!r}")
     return steps
 
@@ -94,24 +133,21 @@ def plan_take(name: str, capture: Path, output: Path, steps: tuple[str, ...], mo
     for step in steps:
         extra: list[str] = []
         inputs: list[Path] = []
-        attach = ["--attach", root]
-        if step == "import":
-            out, source, attach, inputs = folder / "capture.usdc", str(capture), [], [capture]
-        elif step == "stabilize":
-            out, source = folder / "stabilized.usdc", root
-            if models.actor is not None:
-                extra, inputs = ["--actor", str(models.actor)], [models.actor]
+        writes = declaration(step).writes
+        attach = ["--attach", root] if writes.attach else []  # import makes the take root the later steps attach to
+        out, source = folder / layer_name(step, motion_label(models.skull_motion) if writes.role == SYNTHESIZED else ""), root
+        if writes.role == CAPTURED:  # the step that reads the capture
+            source, inputs = str(capture), [capture]
+        elif step == "stabilize" and models.actor is not None:
+            extra, inputs = [flag(step, "actor"), str(models.actor)], [models.actor]
         elif step == "remove":
-            out, source, extra, inputs = folder / "quasistatic.usdc", root, ["--model", str(models.removal)], [models.removal]
+            extra, inputs = [flag(step, "model"), str(models.removal)], [models.removal]
         elif step == "synthesize":
-            out, source = folder / f"synthesized.{motion_label(models.skull_motion)}usdc", root
-            extra, inputs = ["--model", str(models.synthesis)], [models.synthesis]
+            extra, inputs = [flag(step, "model"), str(models.synthesis)], [models.synthesis]
             if models.skull_motion:
-                extra += ["--skull-motion", models.skull_motion]
+                extra += [flag(step, "skull_motion"), models.skull_motion]
                 if Path(models.skull_motion).is_file():
                     inputs.append(Path(models.skull_motion))
-        else:
-            out, source = folder / "take.preview.usdc", root
         argv = (step, source, *extra, "-o", str(out), *attach, "-q")
         plans.append(StepPlan(name, step, folder, out, argv, tuple(Path(p).absolute() for p in inputs)))
     return plans
@@ -127,12 +163,12 @@ def motion_label(skull_motion: str | None) -> str:
 
 def plan_batch(captures: list[str], output: Path, steps: tuple[str, ...], models: Models) -> list[list[StepPlan]]:
     """Every take's steps; the models the steps need must be given."""
-    for flag, path in (("--model", models.removal), ("--synthesis-model", models.synthesis), ("--actor", models.actor),
+    for name, path in (("--removal-model", models.removal), ("--synthesis-model", models.synthesis), ("--actor", models.actor),
                        ("--skull-motion", models.skull_motion)):
         if path is not None:
-            check_not_special(path, flag)
+            check_not_special(path, name)
     if "remove" in steps and models.removal is None:
-        raise UsageError("the remove step needs a removal model (--model)")
+        raise UsageError("the remove step needs a removal model (--removal-model)")
     if "synthesize" in steps and models.synthesis is None:
         raise UsageError("the synthesize step needs a synthesis model (--synthesis-model)")
     found = find_captures(captures)

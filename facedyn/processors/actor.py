@@ -77,7 +77,7 @@ def _actor(name: str, source: str, sample_count: int, **fields):
 
 
 def _from_rig(path: Path, params: dict, name: str):
-    from facedyn.usd.corpus import alignment_vertices
+    from facedyn.rig import alignment_vertices
     from facedyn.usd.rig import read_blendshape_rig
 
     rig = read_blendshape_rig(path, params["mesh"] or None)

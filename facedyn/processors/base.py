@@ -133,6 +133,7 @@ class Writes:
     # a folder filled one complete part at a time (a corpus's takes): a failed or interrupted run keeps the parts it
     # completed, and the next run on the folder resumes from them
     resumable: bool = False
+    attach: bool = True  # a layer may be placed in a take root with --attach (False: the step makes its own root, as import)
 
 
 @dataclass

@@ -4,7 +4,7 @@ The README's workflow for a real actor, as one resumable run within a stated bud
 
 1. `corpus/`: the family corpus simulated on the actor's rig with the recommended protocol
    (standard scale, tissue drawn per take, extra motions, foot-contact impacts, 0.1 mm of
-   tracking noise, the Live Link performances with `--data`; facedyn.usd.corpus.build_corpus);
+   tracking noise, the Live Link performances with `--data`; facedyn.processors.corpus_writer.build_corpus);
 2. `family.removal`: the family's F trained on it with the recommended flags (true skull and
    targets, skull accelerations, sample positions, batches of 2,000), for as many epochs of
    `--subsample` of the pairs as the budget leaves (`--epochs` gives them instead);
@@ -76,7 +76,7 @@ class CalibrateProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.performance import skull_frame_id
+        from facedyn.performance import QUASISTATIC, skull_frame_id
         from facedyn.processors.training_inputs import take_name, take_skull_frame
         from facedyn.usd.errors import TakeError
         from facedyn.usd.frames import TakeFrames
@@ -92,7 +92,7 @@ class CalibrateProcessor(Processor):
         rig = read_blendshape_rig(params["rig"])
         frame = skull_frame_id(rig.neutral, rig.topology)
         for root in roots:
-            head = TakeFrames(root, "quasistatic").head
+            head = TakeFrames(root, QUASISTATIC).head
             if head.skull_orient is None:
                 raise TakeError(f"{root}: no solved skull; stabilize the session's takes first (stabilize --actor ACTOR)")
             if head.topology.fingerprint() != rig.topology.fingerprint():
@@ -170,17 +170,15 @@ def corpus_description(params: dict) -> dict:
 def corpus_specs(rig, params: dict) -> list:
     """The recommended protocol's takes (README: synth --scale standard --randomize-tissue take --extra-motions --impacts
     --noise 0.01 --data DATA)."""
-    from facedyn.sim.corpus import check_data_folder, protocol, takes_matching
+    from facedyn.processors.corpus_writer import protocol_takes
 
-    check_data_folder(params["data"], params["corpus_scale"])
-    specs = protocol(rig, params["corpus_scale"], params["data"], seed=params["seed"], noise_cm=NOISE_CM, physics="tissue",
-                     randomize_tissue="take", extra_motions=True, impacts=True)
-    return takes_matching(specs, params["corpus_only"], params["corpus_scale"], "--corpus-only")
+    return protocol_takes(rig, params["corpus_scale"], params["data"], params["corpus_only"], "--corpus-only", seed=params["seed"],
+                          noise_cm=NOISE_CM, physics="tissue", randomize_tissue="take", extra_motions=True, impacts=True)
 
 
 def build_family_corpus(folder: Path, rig, specs: list, params: dict, progress: Progress) -> dict:
-    """Stage 1: the family corpus (facedyn.usd.corpus.build_corpus); its size for the record."""
-    from facedyn.usd.corpus import build_corpus
+    """Stage 1: the family corpus (facedyn.processors.corpus_writer.build_corpus); its size for the record."""
+    from facedyn.processors.corpus_writer import build_corpus
 
     index = build_corpus(folder, rig, specs, progress=progress, description=corpus_description(params), jobs=params["jobs"])
     return {"takes": len(index["takes"]), "frames": int(index["frames"])}
@@ -213,8 +211,7 @@ def fit_response(roots: list, family: Path, output: Path, params: dict, progress
     from facedyn.dynamics.modelfile import load_model, save_model
     from facedyn.dynamics.response import RIDGES, fit_linear_response, response_template
     from facedyn.dynamics.training import TrainingSequence
-    from facedyn.processors.train_synthesis import check_session_lengths
-    from facedyn.processors.training_inputs import load_takes
+    from facedyn.processors.training_inputs import check_session_lengths, load_takes
 
     takes = load_takes(roots, {"include": "", "exclude": "", "validation": "", "skull": "take"}, progress)
     f = load_model(family, topology=takes[0][1].topology, fps=takes[0][1].fps)

@@ -158,7 +158,7 @@ def add_processor_parser(commands, processor) -> None:
     output_help = writes.help + (f" (default: {writes.default})" if writes.default else "")
     p.add_argument("-o", "--output", type=Path, required=writes.default is None, default=writes.default and Path(writes.default),
                    metavar=writes.metavar, help=output_help)
-    if writes.what == "layer":
+    if writes.what == "layer" and writes.attach:
         p.add_argument("--attach", type=Path, metavar="ROOT", help="place the output in ROOT's subLayers by its role")
     if writes.what == "layer" or reads.frame_range:
         p.add_argument("--frames", type=_frame_range, metavar="FIRST:LAST", help="only these frames (inclusive time codes)")

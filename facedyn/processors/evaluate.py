@@ -28,12 +28,13 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.errors import UsageError
+from facedyn.performance import QUASISTATIC, SYNTHESIZED
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.remove import check_skull_frame, mean_removal, removal_models, removal_of
+from facedyn.processors.model_steps import SYNTHESIZES, check_skull_frame, mean_removal, removal_models, removal_of
 from facedyn.progress import Progress
 
-QUASISTATIC_BELOW = "synthesized"  # evaluate reads what remove wrote: everything below the synthesized role
-REMOVAL_READS = "quasistatic"  # with --removal, evaluate reads what remove reads: everything below its own role
+QUASISTATIC_BELOW = SYNTHESIZED  # evaluate reads what remove wrote: everything below the synthesized role
+REMOVAL_READS = QUASISTATIC  # with --removal, evaluate reads what remove reads: everything below its own role
 MAX_FRAMES = 10_000  # frames of a take evaluate reads (whole, for its spectra): about 2 GB at 4,000 points
 
 
@@ -131,7 +132,6 @@ class EvaluateProcessor(Processor):
 def fitting_model(path: Path, perf, kind: str):
     """The --synthesis model, checked to fit the takes (topology, frame rate) and to synthesize."""
     from facedyn.dynamics.modelfile import load_model
-    from facedyn.processors.synthesize import SYNTHESIZES
 
     model = load_model(path, topology=perf.topology, fps=perf.fps)
     if model.kind not in SYNTHESIZES:

@@ -31,6 +31,7 @@ import numpy as np
 
 from facedyn.errors import UsageError
 from facedyn.io.resample import CubicResampler, SplineWindow
+from facedyn.performance import CAPTURED
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.progress import Progress
 
@@ -43,7 +44,7 @@ class ImportProcessor(Processor):
     version = "1"
     summary = "turn a time-sampled USD mesh or an OBJ sequence into a canonical take (capture layer + take.usda)"
     reads = Reads("sources", metavar="SRC", help="a USD file with an animated mesh, or OBJ files (a folder, a list or a quoted pattern)")
-    writes = Writes("layer", role="captured", help="the capture layer to write (.usdc); its take root is created beside it")
+    writes = Writes("layer", role=CAPTURED, attach=False, help="the capture layer to write (.usdc); its take root is created beside it")
     parameters = (
         Parameter("mesh", str, "", "prim path of the animated Mesh in a USD source (default: the only one)"),
         Parameter("fps", float, 0.0, "OBJ: the sequence's frame rate (required); USD: resample the capture to this rate "
@@ -64,8 +65,6 @@ class ImportProcessor(Processor):
         from facedyn.io.obj import ObjFrames
         from facedyn.usd.source import open_mesh_source
 
-        if request.attach is not None:
-            raise UsageError("import creates or extends its own take root; name it with --root, not --attach")
         source = _source(request)
         root = self.take_root(request)
         _check_flags_apply(source, request.params)
@@ -176,7 +175,7 @@ def _usd_capture(path: Path, mesh, rate: float) -> _Capture:
     """A USD mesh (facedyn.usd.source.MeshSource) as a take at its own rate, or resampled to `rate` (> 0)."""
     from facedyn.usd.takechecks import frame_grid_problem
 
-    mesh.face.role = "captured"
+    mesh.face.role = CAPTURED
     tcps, fps = mesh.timing.time_codes_per_second, mesh.timing.frames_per_second
     codes = frames = mesh.time_codes
     summary = {"source_mesh": str(mesh.prim.GetPath()), "points": mesh.point_count, "fps": tcps}
@@ -214,7 +213,7 @@ def _obj_capture(paths: list[Path], frames: np.ndarray, sequence, params: dict) 
         filled = frames[0] + np.arange(resampler.count, dtype=np.float64)
     first = sequence.first
     layer, timing = _capture_layer(filled, fps, fps, Topology(first.face_vertex_counts, first.face_vertex_indices), sequence.uvs,
-                                   schema.FaceAttributes(role="captured"))
+                                   schema.FaceAttributes(role=CAPTURED))
     summary = {"obj_files": len(paths), "points": len(first.points), "fps": fps, "filled_frames": len(filled) - len(frames)}
     return _Capture(filled, lambda lo, hi: (sequence.read(lo, hi) * units).astype(np.float32), resampler, layer, timing,
                     [str(p) for p in paths], summary)

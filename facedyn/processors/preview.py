@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.errors import UsageError
+from facedyn.performance import PREVIEW
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, single_input
-from facedyn.processors.remove import CHUNK_FRAMES
+from facedyn.processors.model_steps import model_windows
 from facedyn.progress import Progress
 
 
@@ -23,7 +24,7 @@ class PreviewProcessor(Processor):
     version = "1"
     summary = "write a displayColor heat-map layer of the dynamics offsets for usdview"
     reads = Reads("take", help="the take root (reads the strongest result below any preview layer)")
-    writes = Writes("layer", role="preview", help="the preview layer to write (*.preview.usdc)")
+    writes = Writes("layer", role=PREVIEW, help="the preview layer to write (*.preview.usdc)")
     parameters = (
         Parameter("range_mm", float, 0.0, "colour range in mm, symmetric (0: the 99.5th percentile of the take)", minimum=0.0),
     )
@@ -58,7 +59,7 @@ class PreviewProcessor(Processor):
 
         def chunks():
             progress.start("preview", reader.frame_count)
-            for window in reader.windows(CHUNK_FRAMES):
+            for window in model_windows(reader):
                 colours, signed, _ = offset_heat(window.take.points, window.take.offsets, triangles, range_mm)
                 peak = round(float(np.abs(signed).max()), 2)
                 summary["peak_normal_offset_mm"] = max(summary["peak_normal_offset_mm"], peak)

@@ -13,23 +13,18 @@ quasistatic layer: points = the quasistatic skin in skull space, and the removed
 as `primvars:facedyn:dynamicsOffset` (captured - quasistatic). F's features are skull
 landmark motion in the skull frame, so the take must be stabilized.
 
-The take streams through in chunks of CHUNK_FRAMES, each read with the frames of context
-the model's windows reach (context_frames), so the result equals the whole take's and
-memory is bounded by a chunk.
+The take streams through in chunks, each read with the frames of context the model's
+windows reach, so the result equals the whole take's and memory is bounded by a chunk
+(facedyn.processors.model_steps, which the other model steps share).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
-from facedyn.errors import UsageError
-from facedyn.performance import BACKENDS
-from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device, single_input
+from facedyn.performance import BACKENDS, QUASISTATIC
+from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device
+from facedyn.processors.model_steps import OffsetStats, mean_removal, model_inputs, model_windows, removal_models, removal_of, take_reader
 from facedyn.progress import Progress
-
-CHUNK_FRAMES = 1024  # frames computed, held and written (one value clip of a long take) at a time
-REMOVES = ("removal", "response")  # the model kinds that remove: network F, an actor's linear response
 
 
 class RemoveProcessor(Processor):
@@ -37,7 +32,7 @@ class RemoveProcessor(Processor):
     version = "1"
     summary = "remove secondary dynamics with a trained removal model (network F) or an actor's linear response"
     reads = Reads("take", help="the take root (reads the stabilized take below any quasistatic layer)")
-    writes = Writes("layer", role="quasistatic", help="the quasistatic layer to write (.usdc)")
+    writes = Writes("layer", role=QUASISTATIC, help="the quasistatic layer to write (.usdc)")
     parameters = (
         Parameter("model", Path, help="the removal model file (from train-removal), an actor's linear response "
                   "(.response, train-synthesis --response linear) or a blend of them (calibrate's removal.blend)", metavar="MODEL"),
@@ -69,7 +64,7 @@ class RemoveProcessor(Processor):
 
         def chunks():
             progress.start("remove dynamics", reader.frame_count)
-            for window in reader.windows(CHUNK_FRAMES, max(map(context_frames, models))):
+            for window in model_windows(reader, *models):
                 removed = [removal_of(window.take.points, *window.take.skull(), reader.fps, model, params["backend"], params["device"])
                            for model in models]
                 quasistatic, offsets = mean_removal(removed)
@@ -83,113 +78,3 @@ class RemoveProcessor(Processor):
                            summary=stats.summary, chunks=chunks())
 
 
-def take_reader(request: Request, role_name: str):
-    """The take below `role_name`, as a chunked reader (facedyn.usd.frames)."""
-    from facedyn.usd.frames import TakeFrames
-
-    return TakeFrames(single_input(request), role_name, frames=request.frames)
-
-
-def removal_models(path: Path, flag: str, perf, fps: float, take: Path) -> list:
-    """The models a removal file holds (one, or a blend's members) that fit the take: removal
-    models (F) and linear responses, never a synthesis network."""
-    from facedyn.dynamics.modelfile import load_models
-
-    models = load_models(path, topology=perf.topology, fps=fps)
-    for model in models:
-        if model.kind not in REMOVES:
-            raise UsageError(f"--{flag} {path}: a synthesis model (network H), which reads the quasistatic shape it would "
-                             "make; this needs a removal model (F), an actor's linear response (.response) or a blend of them")
-        check_skull_frame(take, perf, path, model)
-    return models
-
-
-def removal_of(points, translate, orient, fps: float, model, backend: str = "auto", device: str = "auto") -> tuple[np.ndarray, np.ndarray]:
-    """(quasistatic skull-space points, offsets) of stabilized points removed by a removal
-    model (F) or an actor's linear response."""
-    from facedyn.dynamics.removal import remove_dynamics
-    from facedyn.dynamics.response import remove_with_response
-
-    if model.kind == "removal":
-        return remove_dynamics(points, translate, orient, fps, model, backend=backend, device=device)
-    return remove_with_response(points, translate, orient, fps, model, device=device)
-
-
-def mean_removal(removed: list) -> tuple[np.ndarray, np.ndarray]:
-    """(quasistatic points, offsets), float32: the mean of one take's removals by several models (--blend)."""
-    if len(removed) == 1:
-        return removed[0]
-    return tuple(np.mean([r[i] for r in removed], axis=0).astype(np.float32) for i in (0, 1))
-
-
-def reader_with_model(request: Request, role_name: str, *kinds: str):
-    """The take below `role_name` (a chunked reader, facedyn.usd.frames) and a model of one of `kinds` that fits it."""
-    from facedyn.dynamics.modelfile import load_model
-
-    reader = take_reader(request, role_name)
-    model = load_model(request.params["model"], topology=reader.head.topology, fps=reader.fps)
-    if model.kind not in kinds:
-        raise UsageError(f"--model {request.params['model']}: a {model.kind} model; this step needs a {' or '.join(kinds)} model")
-    check_skull_frame(request.inputs[0], reader.head, request.params["model"], model)
-    return reader, model
-
-
-def context_frames(model) -> int:
-    """Frames of context on each side that make a chunk's result equal to the whole take's.
-
-    Every window a model reads (feature windows, skull motion past and future, smoothing),
-    plus the frames its velocities and accelerations difference over, and for F the frames
-    a spike replacement looks at (facedyn.dynamics.spikes). A linear response's expression
-    term reads the skin (spikes replaced) less the skull-driven dynamics, low-passed, through
-    its own skull window again (facedyn.dynamics.expression_inertia), and its stiffening
-    reads the response over that window once more (facedyn.dynamics.hardening).
-    """
-    from facedyn.dynamics.expression_inertia import filter_reach
-    from facedyn.dynamics.spikes import REACH
-
-    motion = model.skull_input
-    frames = sum(int(w) for w in model.windows.values()) + motion.past + motion.future + 4
-    if model.kind == "removal":  # F reads the skin with its spikes replaced
-        return frames + REACH
-    calibration = model.info.get("calibration", {})
-    if calibration.get("hardening"):  # its stiffening reads the response over its skull window
-        frames += motion.past + motion.future
-    lowpass = calibration.get("expression_inertia_hz")
-    return frames if lowpass is None else frames + REACH + motion.past + motion.future + filter_reach(model.fps, lowpass)
-
-
-def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:
-    """A model predicts in the skull frame it was trained in: refuse a take stabilized in another."""
-    from facedyn.processors.training_inputs import take_skull_frame
-    from facedyn.usd.errors import TakeError
-
-    expected = model.info.get("skull_frame")
-    if expected is None:  # trained on takes without a rest mesh, or before models recorded it
-        return
-    found = take_skull_frame(perf)
-    if found != expected:
-        what = "has no actor's skull frame (a plain take stabilized without --actor)" if found is None else "is in another skull frame"
-        raise TakeError(f"{path}: the take {what}, not the one {model_path} was trained in; stabilize it with "
-                        "--actor ACTOR, the actor made from the rig or takes the model was trained on")
-
-
-def model_inputs(source, *model_paths: Path) -> list[str]:
-    """The provenance inputs of a layer computed from a take and model files."""
-    return list(source.inputs) + [str(Path(path).resolve()) for path in model_paths]
-
-
-class OffsetStats:
-    """Peak and RMS offset magnitude accumulated chunk by chunk; `summary` fills in as chunks pass."""
-
-    def __init__(self, what: str):
-        self.what, self.peak, self.squares, self.count = what, 0.0, 0.0, 0
-        self.summary: dict = {}
-
-    def add(self, offsets: np.ndarray) -> np.ndarray:
-        magnitude = np.linalg.norm(offsets, axis=-1)
-        self.peak = max(self.peak, float(magnitude.max()))
-        self.squares += float(np.sum(magnitude.astype(np.float64) ** 2))
-        self.count += magnitude.size
-        self.summary.update({f"peak_{self.what}_offset_mm": round(self.peak * 10, 3),
-                             f"rms_{self.what}_offset_mm": round(float(np.sqrt(self.squares / self.count)) * 10, 3)})
-        return offsets

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.errors import UsageError
-from facedyn.performance import BACKENDS
+from facedyn.performance import BACKENDS, QUASISTATIC, RETARGETED, SYNTHESIZED
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device, single_input
-from facedyn.processors.synthesize import SYNTHESIZES, synthesized_chunk, synthesized_layer
+from facedyn.processors.model_steps import SYNTHESIZES, OffsetStats, model_windows, reader_with_model, synthesized_chunk, synthesized_layer
 from facedyn.progress import Progress
 
 
@@ -24,7 +24,7 @@ class RetargetProcessor(Processor):
     version = "1"
     summary = "move actor A's root motion (and dynamics) onto actor B's quasistatic performance"
     reads = Reads("take", help="actor B's take root (reads its quasistatic take below any retargeted layer)")
-    writes = Writes("layer", role="retargeted", help="the retargeted layer to write (.usdc)")
+    writes = Writes("layer", role=RETARGETED, help="the retargeted layer to write (.usdc)")
     parameters = (
         Parameter("source", Path, help="actor A's take: stabilized (synthesis) or with dynamics offsets (delta-transfer)", metavar="TAKE"),
         Parameter("model", Path, None, "actor B's synthesis model: network H or its linear response (method synthesis)", metavar="MODEL"),
@@ -34,7 +34,6 @@ class RetargetProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.processors.remove import reader_with_model
         from facedyn.usd.errors import TakeError
         from facedyn.usd.frames import TakeFrames
 
@@ -49,7 +48,7 @@ class RetargetProcessor(Processor):
             reader, model = TakeFrames(single_input(request), self.writes.role, frames=request.frames), None
         # Actor A's skull motion is its stabilized take (below any quasistatic layer); its offsets, for
         # delta-transfer, are its quasistatic take's (below any synthesized variant).
-        a = TakeFrames(params["source"], "quasistatic" if params["method"] == "synthesis" else "synthesized")
+        a = TakeFrames(params["source"], QUASISTATIC if params["method"] == "synthesis" else SYNTHESIZED)
         b = reader.head
         if a.head.skull_orient is None:
             raise TakeError(f"{params['source']}: actor A's take has no solved skull motion (stabilize it first)")
@@ -68,7 +67,6 @@ class RetargetProcessor(Processor):
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
         from facedyn.dynamics.synthesis import synthesize_dynamics
-        from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames
         from facedyn.usd.runs import read_elsewhere
 
         reader, model, a, params = plan.state
@@ -85,7 +83,7 @@ class RetargetProcessor(Processor):
 
         def chunks():
             progress.start(f"retarget ({params['method']})", f)
-            for window in reader.windows(CHUNK_FRAMES, 0 if model is None else context_frames(model)):
+            for window in model_windows(reader, model):
                 if model is None:
                     points, offsets = delta_transfer(a.read(window.lo, window.hi).offsets, window.take.points, rotation)
                 else:

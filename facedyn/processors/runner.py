@@ -101,6 +101,8 @@ def _check_paths(processor: Processor, request: Request) -> None:
         raise UsageError(f"{request.output}: is a file; -o names the folder to write")
     if request.attach is not None and writes != "layer":
         raise UsageError(f"{processor.name} writes a {writes}, which cannot be attached to a take")
+    if request.attach is not None and not processor.writes.attach:
+        raise UsageError(f"{processor.name} creates or extends its own take root (it takes no --attach)")
     if processor.reads.what == "take":
         _check_roots_read(request.inputs)
         if writes == "layer" and processor.writes.role:

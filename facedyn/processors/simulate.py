@@ -4,7 +4,7 @@ A corpus builder: it writes a folder (corpus.json plus one take folder per take,
 its truth beside it), the input of the trainers. A take the simulator cannot integrate is
 reported, skipped and listed in corpus.json (`failed`); re-running the same command on the
 same folder keeps the takes already complete and simulates only the rest
-(facedyn.usd.corpus.build_corpus). `synth` is its old name, kept as a deprecated alias.
+(facedyn.processors.corpus_writer.build_corpus). `synth` is its old name, kept as a deprecated alias.
 """
 from __future__ import annotations
 
@@ -44,23 +44,21 @@ class SimulateProcessor(Processor):
     )
 
     def prepare(self, request: Request) -> Plan:
-        from facedyn.sim.corpus import check_data_folder, protocol, takes_matching
+        from facedyn.processors.corpus_writer import load_rig, protocol_takes
 
         params = request.params
-        check_data_folder(params["data"], params["scale"])
         band = soft_hz_band(params["soft_hz"])
         if band is not None and params["randomize_tissue"] == "none":
             raise UsageError("--soft-hz sets the band randomized tissue is drawn from: add --randomize-tissue take (or corpus)")
         rig = load_rig(params["rig"], params["actor_seed"])
-        specs = protocol(rig, params["scale"], params["data"], seed=params["seed"], noise_cm=params["noise"],
-                         physics=params["physics"], extra_motions=params["extra_motions"], impacts=params["impacts"],
-                         randomize_tissue=None if params["randomize_tissue"] == "none" else params["randomize_tissue"], soft_hz=band)
-        specs = takes_matching(specs, params["only"], params["scale"])
+        specs = protocol_takes(rig, params["scale"], params["data"], params["only"], seed=params["seed"], noise_cm=params["noise"],
+                               physics=params["physics"], extra_motions=params["extra_motions"], impacts=params["impacts"],
+                               randomize_tissue=None if params["randomize_tissue"] == "none" else params["randomize_tissue"], soft_hz=band)
         description = {"takes": len(specs), "rig": str(params["rig"] or "built-in"), "points": rig.point_count}
         return Plan(description, (request, rig, specs))
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
-        from facedyn.usd.corpus import build_corpus
+        from facedyn.processors.corpus_writer import build_corpus
 
         request, rig, specs = plan.state
         params = request.params
@@ -98,16 +96,3 @@ def soft_hz_band(text: str) -> tuple[float, float] | None:
     if band is None or not (0 < band[0] <= band[1] < 1000):
         raise UsageError(f"--soft-hz {text!r}: expected a band of frequencies LOW-HIGH in Hz with 0 < LOW <= HIGH, e.g. 7.5-9")
     return band
-
-
-def load_rig(path: Path | None, actor_seed: int | None = None):
-    """The built-in face or a USD blend-shape rig, optionally turned into another actor."""
-    if path is None:
-        from facedyn.sim.default_face import default_face
-
-        rig = default_face()
-    else:
-        from facedyn.usd.rig import read_blendshape_rig
-
-        rig = read_blendshape_rig(path)
-    return rig if actor_seed is None else rig.make_actor(seed=actor_seed)

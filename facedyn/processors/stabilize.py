@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.errors import UsageError
-from facedyn.performance import BACKENDS
+from facedyn.performance import BACKENDS, STABILIZED
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, single_input
 from facedyn.progress import Progress
 from facedyn.stabilize.chunks import StreamingBlend, chunk_ranges
@@ -44,7 +44,7 @@ class StabilizeProcessor(Processor):
     version = "1"
     summary = "solve the rigid skull motion (mode pursuit, or a three-point/Procrustes/ICP baseline)"
     reads = Reads("take", help="the take root (reads its capture, below any stabilized layer)")
-    writes = Writes("layer", role="stabilized", help="the stabilized layer to write (.usdc)")
+    writes = Writes("layer", role=STABILIZED, help="the stabilized layer to write (.usdc)")
     parameters = (
         Parameter("method", str, "mode-pursuit", "mode-pursuit, or a baseline: three-point, procrustes, icp", METHODS),
         Parameter("solver", str, "fast", "mode pursuit's solver: fast, or reference (the paper's PyTorch formulation)", ("fast", "reference")),

@@ -4,20 +4,19 @@ Reads the quasistatic take (the layers below the synthesized role, so other synt
 variants never feed back) and writes `synthesized.NAME.usdc`: the new skull motion,
 points = quasistatic skin + the synthesized offsets (propagated to the whole mesh), and the
 offsets primvar. The take streams through in chunks with the model's context frames, as in
-remove (facedyn.processors.remove).
+remove (facedyn.processors.model_steps).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
 from facedyn.errors import UsageError
-from facedyn.performance import BACKENDS
+from facedyn.performance import BACKENDS, SYNTHESIZED
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device
-from facedyn.processors.remove import CHUNK_FRAMES, OffsetStats, context_frames, model_inputs, reader_with_model
+from facedyn.processors.model_steps import SYNTHESIZES, OffsetStats, model_windows, reader_with_model, synthesized_chunk, synthesized_layer
 from facedyn.progress import Progress
 
 
-SYNTHESIZES = ("synthesis", "response")  # the model kinds that synthesize: network H, an actor's linear response
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")
 BVH_PARAMETERS = (
     Parameter("bvh_units", float, None, "cm per BVH unit (default: from the skeleton's height; CMU files 5.64)",
@@ -27,13 +26,12 @@ BVH_PARAMETERS = (
 )
 
 
-
 class SynthesizeProcessor(Processor):
     name = "synthesize"
     version = "1"
     summary = "synthesize secondary dynamics for a (new) skull motion with a synthesis model (network H)"
     reads = Reads("take", help="the take root (reads the quasistatic take below any synthesized layer)")
-    writes = Writes("layer", role="synthesized", help="the synthesized layer to write (e.g. synthesized.hop.usdc)")
+    writes = Writes("layer", role=SYNTHESIZED, help="the synthesized layer to write (e.g. synthesized.hop.usdc)")
     parameters = (
         Parameter("model", Path, help="the synthesis model file (network H, or an actor's linear response .response; "
                   "from train-synthesis)", metavar="MODEL"),
@@ -68,7 +66,7 @@ class SynthesizeProcessor(Processor):
 
         def chunks():
             progress.start("synthesize dynamics", reader.frame_count)
-            for window in reader.windows(CHUNK_FRAMES, context_frames(model)):
+            for window in model_windows(reader, model):
                 t, q = translate[window.lo:window.hi], orient[window.lo:window.hi]
                 points, offsets = synthesize_dynamics(window.take.points, t, q, reader.fps, model,
                                                       backend=params["backend"], device=params["device"])
@@ -89,25 +87,3 @@ def bvh_options(params: dict) -> dict:
     return {key: params[f"bvh_{key}"] for key in ("units", "up", "forward") if params[f"bvh_{key}"] is not None}
 
 
-def synthesized_chunk(reader, window, points, offsets, translate, orient, stats):
-    """One window's output frames of a synthesized layer (synthesize and retarget write the same shape):
-    points and offsets computed over the window's frames, the skull motion over the take's."""
-    from facedyn.usd.layers import LayerContent
-
-    inner = window.inner
-    return LayerContent(frames=reader.time_codes[window.start:window.stop], points=points[inner],
-                        offsets=stats.add(offsets[inner]), skull_translate=translate[window.start:window.stop],
-                        skull_orient=orient[window.start:window.stop])
-
-
-def synthesized_layer(frames, landmarks, source, model_path, role_name, summary) -> LayerOutput:
-    """The static part of a synthesized layer (its per-frame values come as arrays or chunks)."""
-    from facedyn.usd import schema
-    from facedyn.usd.layers import LayerContent
-
-    layer = LayerContent(
-        frames=frames, mesh_path=source.mesh_path, skull_path=source.skull_path, face=schema.FaceAttributes(role=role_name),
-        skull=schema.SkullAttributes(solver="resampled", landmarks=landmarks),
-    )
-    inputs = model_inputs(source, model_path) if model_path else list(source.inputs)
-    return LayerOutput(layer=layer, timing=source.timing, inputs=inputs, summary=summary)

@@ -11,7 +11,7 @@ from functools import partial
 from facedyn.errors import UsageError
 from facedyn.processors.base import FileOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths, training_face,
-                                                 validation_names)
+                                                 training_summary, validation_names)
 from facedyn.progress import Progress
 
 
@@ -69,9 +69,3 @@ class TrainRemovalProcessor(Processor):
         model.info["training"]["skull"] = params["skull"]
         model.info["training"]["inputs"] = [str(p) for p in request.inputs]
         return FileOutput(partial(save_model, model), training_summary(model, takes, face, last))
-
-
-def training_summary(model, takes, face, last: dict) -> dict:
-    """What a trainer reports: the data, the validation errors, the last losses."""
-    return {"takes": len(takes), "samples": int(len(face.samples)), "fps": model.fps,
-            "skull_features": model.skull_input.to_json(), "validation": model.info["validation"], "final_loss": last}

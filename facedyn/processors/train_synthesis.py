@@ -24,9 +24,8 @@ from pathlib import Path
 
 from facedyn.errors import UsageError
 from facedyn.processors.base import FileOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.train_removal import training_summary
-from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, epoch_reporter, load_takes, read_truths, training_face,
-                                                 validation_names)
+from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, check_session_lengths, epoch_reporter, load_takes, read_truths,
+                                                 training_face, training_summary, validation_names)
 from facedyn.progress import Progress
 
 
@@ -141,19 +140,6 @@ def check_sources(params: dict) -> None:
         raise UsageError("--ridge is the linear response's penalty; give it with --response linear")
     elif params["quasistatic"] is None:
         raise UsageError("--quasistatic MODEL|truth is required: what gives the takes' quasistatic shapes")
-
-
-def check_session_lengths(takes: list, model, settle_s: float) -> None:
-    """Every session take keeps enough frames after --settle for the response to count it."""
-    from facedyn.dynamics.response import MIN_ROWS, settled_frames
-    from facedyn.usd.errors import TakeError
-
-    for name, perf in takes:
-        keep = settled_frames(perf.frame_count, perf.fps, settle_s, model)
-        if keep.stop - keep.start < MIN_ROWS:
-            raise TakeError(f"take {name!r}: {perf.frame_count} frames leave {max(keep.stop - keep.start, 0)} after "
-                            f"--settle {settle_s:g} s and the skull window's last {model.skull_input.future + 1}; a linear response "
-                            f"needs {MIN_ROWS} per take")
 
 
 def epochs_of(params: dict, calibrated) -> int:

@@ -1,4 +1,4 @@
-"""What the trainers share: reading takes from corpora, their truth, and their common flags."""
+"""What the trainers share: reading takes from corpora, their truth, their common flags, their checks and reports."""
 from __future__ import annotations
 
 import fnmatch
@@ -150,3 +150,22 @@ def read_truths(inputs: list[Path], names: list[str]) -> dict:
 
 def take_name(root: Path) -> str:
     return root.name if root.is_dir() else root.parent.name if root.name in ("take.usda", "truth.usda") else root.stem
+
+
+def training_summary(model, takes, face, last: dict) -> dict:
+    """What a trainer reports: the data, the validation errors, the last losses."""
+    return {"takes": len(takes), "samples": int(len(face.samples)), "fps": model.fps,
+            "skull_features": model.skull_input.to_json(), "validation": model.info["validation"], "final_loss": last}
+
+
+def check_session_lengths(takes: list, model, settle_s: float) -> None:
+    """Every session take keeps enough frames after --settle for the response to count it."""
+    from facedyn.dynamics.response import MIN_ROWS, settled_frames
+    from facedyn.usd.errors import TakeError
+
+    for name, perf in takes:
+        keep = settled_frames(perf.frame_count, perf.fps, settle_s, model)
+        if keep.stop - keep.start < MIN_ROWS:
+            raise TakeError(f"take {name!r}: {perf.frame_count} frames leave {max(keep.stop - keep.start, 0)} after "
+                            f"--settle {settle_s:g} s and the skull window's last {model.skull_input.future + 1}; a linear response "
+                            f"needs {MIN_ROWS} per take")

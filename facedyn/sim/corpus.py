@@ -27,7 +27,7 @@ import numpy as np
 from facedyn.errors import FacedynError, UsageError
 from facedyn.geometry import quaternion
 from facedyn import motion
-from facedyn.sim.rig import FaceRig
+from facedyn.rig import FaceRig
 from facedyn.sim.speech import speech_weights
 from facedyn.sim import tissue as springs, volumetric
 from facedyn.sim.tissue import TissueParams

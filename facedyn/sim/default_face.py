@@ -15,7 +15,7 @@ import numpy as np
 
 from facedyn.geometry import quaternion
 from facedyn.performance import UVs, Topology
-from facedyn.sim.rig import FaceRig
+from facedyn.rig import FaceRig
 
 RESOLUTION = 26  # quads along each edge of the quad sphere: 6 * 26**2 + 2 = 4,058 points
 

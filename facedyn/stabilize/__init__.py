@@ -5,19 +5,9 @@ The public names load on first use (PEP 562): importing a submodule such as
 `facedyn.stabilize.chunks` (the stabilize command's declaration does) must not pull in the
 solvers and SciPy, which every command's start-up would then pay for.
 """
-from __future__ import annotations
-
-import importlib
+from facedyn.lazy_exports import lazy_exports
 
 _PUBLIC = {"METHODS": "api", "SOLVERS": "api", "StabilizeResult": "api", "stabilize": "api",
            "REFERENCE_FPS": "schedule", "Schedule": "schedule"}
 
-__all__ = sorted(_PUBLIC)
-
-
-def __getattr__(name: str):
-    if name not in _PUBLIC:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{_PUBLIC[name]}"), name)
-    globals()[name] = value
-    return value
+__all__, __getattr__ = lazy_exports(__name__, _PUBLIC)

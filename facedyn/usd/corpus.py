@@ -16,6 +16,10 @@ A corpus is built to survive interruptions: each take is written under a tempora
 renamed into place with its recipe (`<take>/simulated.json`: a hash of its TakeSpec, the
 rig and the tissue), so a folder with a recipe is complete, and a later run on the same
 folder keeps the takes whose recipe matches and simulates only the rest.
+
+This module is the corpus's files and imports no simulator, so the trainers and `evaluate`
+read a corpus without loading the physics; `facedyn.processors.corpus_writer` simulates the
+takes and writes them with it.
 """
 from __future__ import annotations
 
@@ -23,18 +27,15 @@ import hashlib
 import json
 import os
 import shutil
-import time
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 import facedyn
-from facedyn.progress import Progress
 from facedyn.errors import FacedynError
-from facedyn.sim.corpus import SimulatedPerformance, TakeSpec, simulate_each
-from facedyn.sim.rig import FaceRig
-from facedyn.sim.tissue import TissueParams
+from facedyn.performance import CAPTURED, QUASISTATIC, STABILIZED
+from facedyn.rig import FaceRig, alignment_vertices
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layers import LayerContent, write_layer, write_take_root
@@ -47,15 +48,15 @@ TAKE_RECIPE = "simulated.json"  # in a complete take folder: its recipe and its 
 PARTIAL = ".partial-"  # a take folder being written: .<take>.partial-<pid>
 
 
-def write_simulated_take(folder: Path, take: SimulatedPerformance, rig: FaceRig) -> dict:
-    """Write one simulated take (capture + truth layers + roots) into `folder`."""
+def write_simulated_take(folder: Path, take, rig: FaceRig) -> dict:
+    """Write one simulated take (a facedyn.sim.corpus.SimulatedPerformance: capture + truth layers + roots) into `folder`."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "truth").mkdir(exist_ok=True)
     frames = take.frames
     timing = Timing(take.fps, take.fps, float(frames[0]), float(frames[-1]))
     spec = {k: v for k, v in asdict(take.spec).items() if v is not None}
     face = schema.FaceAttributes(
-        role="captured", rest_points=rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices,
+        role=CAPTURED, rest_points=rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices,
         alignment_vertices=alignment_vertices(rig),
     )
     capture = write_layer(
@@ -67,12 +68,12 @@ def write_simulated_take(folder: Path, take: SimulatedPerformance, rig: FaceRig)
     skull = write_layer(
         folder / "truth" / "skull.usdc",
         LayerContent(frames=frames, points=take.captured, skull_translate=take.skull_translate, skull_orient=take.skull_orient,
-                     face=schema.FaceAttributes(role="stabilized"), skull=schema.SkullAttributes(solver="truth")),
+                     face=schema.FaceAttributes(role=STABILIZED), skull=schema.SkullAttributes(solver="truth")),
         timing, _provenance("simulate-truth-skull", spec, frames, _layers(capture)),
     )
     quasistatic = write_layer(
         folder / "truth" / "quasistatic.usdc",
-        LayerContent(frames=frames, points=take.quasistatic, offsets=take.offsets, face=schema.FaceAttributes(role="quasistatic")),
+        LayerContent(frames=frames, points=take.quasistatic, offsets=take.offsets, face=schema.FaceAttributes(role=QUASISTATIC)),
         timing, _provenance("simulate-truth-quasistatic", spec, frames, _layers(skull, capture)),
     )
     write_take_root(folder / "take.usda", [capture], timing)
@@ -91,14 +92,6 @@ def write_simulated_take(folder: Path, take: SimulatedPerformance, rig: FaceRig)
     }
 
 
-def alignment_vertices(rig: FaceRig) -> np.ndarray | None:
-    """The rig's outer eye corners and under-nose vertex, when it names them."""
-    names = ("eye_corner_left", "eye_corner_right", "nose_base")
-    if not all(name in rig.landmarks for name in names):
-        return None
-    return np.array([rig.landmarks[name] for name in names], np.int32)
-
-
 def _layers(*paths: Path) -> list[LayerInput]:
     """The truth layers below a truth layer, as the inputs it is computed from (so truth.usda's stack reads as current)."""
     return [LayerInput(str(Path(p).resolve()), content_id(p), LAYER) for p in paths]
@@ -106,77 +99,6 @@ def _layers(*paths: Path) -> list[LayerInput]:
 
 def _provenance(processor: str, spec: dict, frames: np.ndarray, inputs: list) -> schema.Provenance:
     return schema.Provenance(processor, f"facedyn {facedyn.__version__}", spec, (float(frames[0]), float(frames[-1])), inputs)
-
-
-def build_corpus(
-    output: Path,
-    rig: FaceRig,
-    specs: list[TakeSpec],
-    tissue: TissueParams | None = None,
-    progress: Progress | None = None,
-    description: dict | None = None,
-    jobs: int = 1,
-    *,
-    other_recipes: str = "redo",
-) -> dict:
-    """Simulate (`jobs` takes at a time) and write every take of `specs`; return the corpus index.
-
-    Takes already complete in `output` with the same recipe are kept (an interrupted corpus
-    resumes); a complete take of another recipe is simulated again (`other_recipes`
-    'redo') or refused ('refuse': a FacedynError naming what differs). A take the
-    simulator cannot integrate is reported, skipped and listed under `failed`: the others
-    go on, and the corpus is written when at least one take is.
-    """
-    progress = progress or Progress.silent()
-    output = corpus_folder(output)
-    started = time.perf_counter()
-    corpus = ResumedCorpus(output, rig, specs, tissue, other_recipes)
-    progress.start(f"simulate {len(specs)} takes", len(specs))
-    if corpus.resumed:
-        progress.note(f"{output}: {corpus.resumed} of {len(specs)} takes already complete, kept")
-        progress.advance(corpus.resumed)
-    for spec, take, error in simulate_each(rig, corpus.missing(), tissue, jobs):
-        if error is not None:
-            corpus.errors[spec.name] = error
-            progress.note(f"take {spec.name} skipped: {error}")
-        else:
-            t0 = time.perf_counter()
-            corpus.done[spec.name] = write_take_atomically(output, take, rig, corpus.recipes[spec.name])
-            corpus.written += time.perf_counter() - t0
-        progress.advance()
-    progress.finish()
-    return corpus.write_index(description, jobs, time.perf_counter() - started)
-
-
-class ResumedCorpus:
-    """A corpus folder's takes for `specs`: their recipes, the ones complete (kept from an earlier run, or
-    written now: `done`, name -> corpus entry) and the ones that failed (`errors`, name -> message)."""
-
-    def __init__(self, output: Path, rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | None, other_recipes: str = "redo"):
-        if other_recipes not in ("redo", "refuse"):
-            raise ValueError(f"other_recipes must be 'redo' or 'refuse', got {other_recipes!r}")
-        self.output, self.rig, self.specs, self.tissue = output, rig, specs, tissue
-        rig_hash = rig_fingerprint(rig)
-        self.recipes = {spec.name: take_recipe(spec, rig_hash, tissue) for spec in specs}
-        sweep_partial_takes(output)
-        refuse = other_recipes == "refuse"
-        self.done = {spec.name: entry for spec in specs
-                     if (entry := complete_take(output / spec.name, self.recipes[spec.name], refuse)) is not None}
-        self.resumed = len(self.done)
-        self.errors: dict[str, str] = {}
-        self.written = 0.0  # seconds spent writing takes
-
-    def missing(self) -> list[TakeSpec]:
-        return [spec for spec in self.specs if spec.name not in self.done]
-
-    def write_index(self, description: dict | None, jobs: int, total: float) -> dict:
-        """corpus.json for the takes in the specs' order; a FacedynError when none of them could be simulated."""
-        failed = [{"name": spec.name, "error": self.errors[spec.name]} for spec in self.specs if spec.name in self.errors]
-        if self.specs and not self.done:
-            raise FacedynError(f"{self.output}: no take could be simulated; {failed[0]['name']}: {failed[0]['error']}")
-        takes = [self.done[spec.name] for spec in self.specs if spec.name in self.done]
-        return write_corpus_index(self.output, self.rig, self.tissue, takes, description, jobs, self.written, total,
-                                  failed=failed, resumed=self.resumed)
 
 
 def rig_fingerprint(rig: FaceRig) -> str:
@@ -191,8 +113,8 @@ def rig_fingerprint(rig: FaceRig) -> str:
     return digest.hexdigest()
 
 
-def take_recipe(spec: TakeSpec, rig_hash: str, tissue: TissueParams | None) -> dict:
-    """What decides a take's content, JSON-able: its spec (a data file by its name and content,
+def take_recipe(spec, rig_hash: str, tissue) -> dict:
+    """What decides a take's content, JSON-able: its spec (a facedyn.sim.corpus.TakeSpec; a data file by its name and content,
     not by the path it was given as), the rig's fingerprint and the corpus's tissue, with their hash."""
     recipe = {k: v for k, v in asdict(spec).items() if v is not None}
     if spec.dialog is not None:
@@ -245,7 +167,7 @@ def _differences(old: dict, new: dict) -> str:
     return ", ".join(names)
 
 
-def write_take_atomically(output: Path, take: SimulatedPerformance, rig: FaceRig, recipe: dict) -> dict:
+def write_take_atomically(output: Path, take, rig: FaceRig, recipe: dict) -> dict:
     """Write a take under a temporary name with its recipe and rename it into place; return its corpus entry."""
     name = take.spec.name
     partial = output / f".{name}{PARTIAL}{os.getpid()}"
@@ -295,15 +217,15 @@ def corpus_folder(output: Path) -> Path:
     return output
 
 
-def write_corpus_index(output: Path, rig: FaceRig, tissue: TissueParams | None, takes: list[dict], description: dict | None,
+def write_corpus_index(output: Path, rig: FaceRig, tissue: dict, takes: list[dict], description: dict | None,
                        jobs: int, written: float, total: float, *, failed: list[dict] = (), resumed: int = 0) -> dict:
     """Write corpus.json (atomically) for the written takes (write_simulated_take's entries, in order) and the failed
-    ones ({name, error}; `resumed`: takes kept from an earlier run); return it."""
+    ones ({name, error}; `resumed`: takes kept from an earlier run; `tissue`: the tissue's parameters); return it."""
     frames = sum(t["frames"] for t in takes)
     index = {
         "rig": rig.name,
         "points": rig.point_count,
-        "tissue": asdict(tissue or TissueParams()),
+        "tissue": tissue,
         "takes": takes,
         "failed": list(failed),
         "resumed": resumed,

@@ -16,19 +16,18 @@ from pathlib import Path
 
 from pxr import Sdf, Usd
 
-from facedyn.performance import Role, roles
+from facedyn.performance import CAPTURED, PREVIEW, QUASISTATIC, RETARGETED, STABILIZED, SYNTHESIZED, Role, roles
 from facedyn.usd.runs import facedyn_metadata
 from facedyn.usd.stage import resolve_asset_path
 
 TAKE_ROOT = "take"  # the role a take root records: it lists layers and is none of them
-CAPTURED = "captured"  # the base role: the capture every other layer is computed over; it sets the take's frames
 LEGACY_PROCESSOR_ROLES = {
-    "import": "captured",
-    "stabilize": "stabilized",
-    "remove": "quasistatic",
-    "synthesize": "synthesized",
-    "retarget": "retargeted",
-    "preview": "preview",
+    "import": CAPTURED,
+    "stabilize": STABILIZED,
+    "remove": QUASISTATIC,
+    "synthesize": SYNTHESIZED,
+    "retarget": RETARGETED,
+    "preview": PREVIEW,
 }
 """The role of a layer written before layers recorded their role, by its recorded processor."""
 

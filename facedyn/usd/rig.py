@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel, Vt
 
-from facedyn.sim.rig import FaceRig
+from facedyn.rig import FaceRig
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layers import check_writable, export_atomically
 from facedyn.usd.stage import get_prim, layer_name, open_stage

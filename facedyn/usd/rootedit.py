@@ -23,11 +23,11 @@ from typing import Callable, Iterator
 from pxr import Sdf, Tf, Vt
 
 from facedyn.errors import UsageError
+from facedyn.performance import CAPTURED, roles
 from facedyn.performance import role as find_role
-from facedyn.performance import roles
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layers import check_writable, export_atomically, new_take_root
-from facedyn.usd.layerstack import CAPTURED, Entry, effective_ranks, place, recorded_role_name
+from facedyn.usd.layerstack import Entry, effective_ranks, place, recorded_role_name
 from facedyn.usd.runs import facedyn_metadata
 from facedyn.usd.stackstatus import (MUTED_KEY, check_take_root, frame_range, muted_assets, open_root, read_entries, stack_status,
                                      take_frames)

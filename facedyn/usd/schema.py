@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Sdf, Usd, Vt
 
+from facedyn.performance import CAPTURED
 from facedyn.usd.runs import INPUT_IDENTITY, LayerInput, run_id
 from facedyn.usd.stage import relative_asset_path
 
@@ -46,7 +47,7 @@ def _get(prim: Usd.Prim, name: str, dtype) -> np.ndarray | None:
 class FaceAttributes:
     """The static FacedynFaceAPI values of a face mesh."""
 
-    role: str | None = "captured"  # None: this layer says nothing about the role
+    role: str | None = CAPTURED  # None: this layer says nothing about the role
     rest_points: np.ndarray | None = None
     skin_samples: np.ndarray | None = None
     rigid_weights: np.ndarray | None = None
@@ -57,7 +58,7 @@ class FaceAttributes:
     def read(cls, prim: Usd.Prim) -> "FaceAttributes":
         role = prim.GetAttribute(ROLE_ATTR).Get() if prim.HasAPI(FACE_API) else None
         return cls(
-            role=str(role) if role else "captured",
+            role=str(role) if role else CAPTURED,
             rest_points=_get(prim, REST_POINTS_ATTR, np.float32),
             skin_samples=_get(prim, SKIN_SAMPLES_ATTR, np.int32),
             rigid_weights=_get(prim, RIGID_WEIGHTS_ATTR, np.float32),

@@ -25,9 +25,9 @@ from pathlib import Path
 
 from pxr import Sdf, Tf, Usd
 
-from facedyn.performance import roles
+from facedyn.performance import CAPTURED, roles
 from facedyn.usd.errors import TakeError
-from facedyn.usd.layerstack import CAPTURED, Entry, effective_ranks, is_take_root, recorded_role_name
+from facedyn.usd.layerstack import Entry, effective_ranks, is_take_root, recorded_role_name
 from facedyn.usd.runs import INPUT_IDENTITY, LAYER, content_id, facedyn_metadata, legacy_id
 from facedyn.usd.schema import recorded_inputs
 from facedyn.usd.stage import relative_asset_path, resolve_asset_path

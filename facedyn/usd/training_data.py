@@ -11,7 +11,7 @@ from pathlib import Path
 
 from pxr import Sdf, Usd
 
-from facedyn.performance import Performance
+from facedyn.performance import CAPTURED, QUASISTATIC, Performance
 from facedyn.usd.corpus import CORPUS_INDEX, read_corpus_index
 from facedyn.usd.errors import TakeError
 from facedyn.usd.take import TakeSource, read_stage, read_take_below
@@ -51,7 +51,7 @@ def read_training_take(root: Path, skull: str = "take", frames=None) -> tuple[Pe
         layer.subLayerPaths = [str(truth_skull), str(capture)]
         return read_stage(Usd.Stage.Open(layer), truth_skull, frames=frames)
     path = folder / "take.usda" if folder else root
-    perf, source = read_take_below(path, "quasistatic", frames=frames)  # the stabilized capture, not a removal attached above it
-    if perf.skull_orient is None or perf.role == "captured":
+    perf, source = read_take_below(path, QUASISTATIC, frames=frames)  # the stabilized capture, not a removal attached above it
+    if perf.skull_orient is None or perf.role == CAPTURED:
         raise TakeError(f"{path}: the take is not stabilized (run `usdfacedyn stabilize` first, or train with --skull truth)")
     return perf, source

@@ -17,7 +17,7 @@ pytest.importorskip("distributed")
 
 from facedyn.batch.cluster import open_client, run_steps  # noqa: E402
 from facedyn.batch.command import add_batch_arguments, run_batch  # noqa: E402
-from facedyn.batch.corpus import build_corpus_on  # noqa: E402
+from facedyn.batch.simulate import build_corpus_on  # noqa: E402
 from facedyn.batch.plan import Models, plan_batch  # noqa: E402
 from facedyn.batch.state import STATE_FILE, file_checksum  # noqa: E402
 from facedyn.dynamics.face import FaceSetup  # noqa: E402
@@ -136,6 +136,36 @@ def test_batch_usage_errors(shots, tmp_path):
     listing.write_text(f"# two shots\n{shots / 'shot0.usdc'}\n\n{shots / 'shot1.usdc'}\n")
     takes = plan_batch([str(listing)], tmp_path / "out", ("import",), Models())
     assert [plans[0].take for plans in takes] == ["shot0", "shot1"]
+
+
+def test_batch_steps_are_the_processors_with_the_flags_they_declare(tmp_path, capsys):
+    from facedyn.batch.command import models_from
+    from facedyn.batch.plan import STEPS, flag
+    from facedyn.errors import FacedynError, UsageError
+    from facedyn.processors import registry
+
+    files = {name: tmp_path / name for name in ("shot0.usdc", "f.removal", "h.synthesis", "actor.usda")}
+    for path in files.values():
+        path.write_bytes(b"")
+    models = Models(files["f.removal"], files["h.synthesis"], "hop", files["actor.usda"])
+    [plans] = plan_batch([str(files["shot0.usdc"])], tmp_path / "out", STEPS, models)
+    assert {plan.step: plan.output.name for plan in plans} == OUTPUTS
+    for plan in plans:
+        declared = {p.flag for p in registry.load(plan.step).parameters} | {"--attach"}
+        given = [a for a in plan.argv if a.startswith("--")]
+        assert set(given) <= declared, (plan.step, given)
+    argv = {plan.step: plan.argv for plan in plans}
+    assert argv["remove"][argv["remove"].index("--model") + 1] == str(files["f.removal"])
+    assert argv["synthesize"][argv["synthesize"].index("--model") + 1] == str(files["h.synthesis"])
+    assert "--actor" in argv["stabilize"] and "--attach" not in argv["import"]
+    with pytest.raises(FacedynError, match="declares no 'strength' parameter"):
+        flag("remove", "strength")
+    # batch's flag for remove's model is --removal-model; --model is its deprecated alias
+    args = batch_args(str(files["shot0.usdc"]), "-o", str(tmp_path / "out"), "--model", str(files["f.removal"]))
+    assert models_from(args).removal == files["f.removal"] and "--removal-model" in capsys.readouterr().err
+    assert models_from(batch_args("x", "-o", "y", "--removal-model", "f")).removal == Path("f")
+    with pytest.raises(UsageError, match="old name of --removal-model"):
+        models_from(batch_args("x", "-o", "y", "--removal-model", "f", "--model", "g"))
 
 
 def tree_checksums(folder: Path) -> dict[str, str]:

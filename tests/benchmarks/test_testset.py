@@ -13,7 +13,7 @@ BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 sys.path.insert(0, str(BENCHMARKS))
 
 from facedyn.performance import Topology  # noqa: E402
-from facedyn.sim.rig import FaceRig  # noqa: E402
+from facedyn.rig import FaceRig  # noqa: E402
 from testset.generate import Drives, simulate_take, write_take  # noqa: E402
 from testset.takes import TakeRecipe  # noqa: E402
 from testset.tissue import MujocoTissue, TissueParams  # noqa: E402

@@ -69,7 +69,7 @@ def test_two_takes_of_one_held_expression_share_the_actors_skull_frame(rig_and_t
 
 
 def test_models_refuse_takes_in_another_skull_frame(rig_and_takes, tmp_path, capsys):
-    from facedyn.processors.remove import check_skull_frame
+    from facedyn.processors.model_steps import check_skull_frame
     from facedyn.processors.training_inputs import take_skull_frame
     from facedyn.usd.errors import TakeError
 

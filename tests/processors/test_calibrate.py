@@ -9,7 +9,7 @@ from facedyn.cli import main
 from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
 from facedyn.sim.tissue import TissueParams
-from facedyn.usd.corpus import build_corpus
+from facedyn.processors.corpus_writer import build_corpus
 from facedyn.usd.rig import write_blendshape_rig
 
 SESSION = [("smile", "platform:6"), ("smile", "walk"), ("jaw_open", "platform:9"), ("jaw_open", "hop")]

@@ -10,7 +10,8 @@ from facedyn.dynamics import diagnostics
 from facedyn.preview.images import read_image
 from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
-from facedyn.usd.corpus import build_corpus, read_truth
+from facedyn.processors.corpus_writer import build_corpus
+from facedyn.usd.corpus import read_truth
 
 
 def cli(*argv):

@@ -13,7 +13,7 @@ from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
 from facedyn.stabilize.api import stabilize
 from facedyn.usd import clips, layers
-from facedyn.usd.corpus import build_corpus
+from facedyn.processors.corpus_writer import build_corpus
 from facedyn.usd.take import read_take
 
 
@@ -145,7 +145,7 @@ def test_streamed_remove_and_synthesize_equal_the_whole_take(take, tmp_path, mon
     from facedyn.dynamics.modelfile import load_model
     from facedyn.dynamics.removal import remove_dynamics
     from facedyn.dynamics.synthesis import synthesize_dynamics
-    from facedyn.processors import remove, synthesize
+    from facedyn.processors import model_steps
 
     corpus = take.parent
     models = tmp_path / "models"
@@ -155,8 +155,7 @@ def test_streamed_remove_and_synthesize_equal_the_whole_take(take, tmp_path, mon
     assert main(["train-synthesis", str(corpus), "-o", str(models / "h.synthesis"), "--quasistatic", str(models / "f.removal"),
                  "--skull", "truth", "--epochs", "1", "--json"]) == 0
     assert cli("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root) == 0
-    monkeypatch.setattr(remove, "CHUNK_FRAMES", 100)  # 360 frames: four chunks, each with context on both sides
-    monkeypatch.setattr(synthesize, "CHUNK_FRAMES", 100)
+    monkeypatch.setattr(model_steps, "CHUNK_FRAMES", 100)  # 360 frames: four chunks, each with context on both sides
     stabilized, _ = read_take(root)
     assert cli("remove", root, "-o", take / "quasistatic.usdc", "--model", models / "f.removal", "--attach", root) == 0
     quasistatic, _ = read_take(root)

@@ -14,7 +14,8 @@ from facedyn.cli import main
 from facedyn.evaluation import residual_fraction, stabilization_errors
 from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
-from facedyn.usd.corpus import build_corpus, read_truth
+from facedyn.processors.corpus_writer import build_corpus
+from facedyn.usd.corpus import read_truth
 from facedyn.usd.take import read_take, read_take_below
 
 pytestmark = pytest.mark.slow  # every test reads the module's corpus and the F and H trained on it
@@ -238,8 +239,7 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     # quasistatic layer (the capture less the removed offsets) in synthesis, so the two differ only by what it adds
     term = float(np.sqrt(np.mean(np.square(removed.offsets - synthesized.offsets)) / np.mean(np.square(synthesized.offsets))))
     assert 0.001 < term < 0.03  # measured 0.007 (0.06 when synthesis read the skull alone)
-    import facedyn.processors.remove as remove
-    import facedyn.processors.synthesize as synthesize
+    import facedyn.processors.model_steps as model_steps
 
     stiff = tmp_path / "stiff.response"  # the same response on tissue that stiffens with motion
     fitted.info["calibration"]["hardening"] = 2000.0
@@ -251,8 +251,7 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
         stiffened[command] = read_layers([take / f"stiff.{command}.usdc", root]).offsets
     assert not np.allclose(stiffened["synthesize"], synthesized.offsets, atol=1e-4)  # the stiffening changes it
     # streamed in chunks, both are the whole take's (the expression term and the stiffening read neighbouring frames)
-    monkeypatch.setattr(remove, "CHUNK_FRAMES", 16)
-    monkeypatch.setattr(synthesize, "CHUNK_FRAMES", 16)
+    monkeypatch.setattr(model_steps, "CHUNK_FRAMES", 16)
     for model, whole in ((response, {"remove": removed.offsets, "synthesize": synthesized.offsets}), (stiff, stiffened)):
         for command in ("remove", "synthesize"):
             out = take / f"chunked.{command}.{model.stem}.usdc"
@@ -429,7 +428,7 @@ def _layer_points(path: Path) -> np.ndarray:
 
 
 def test_retarget_streams_in_chunks_that_equal_the_whole_take(corpus, tmp_path, monkeypatch):
-    import facedyn.processors.remove as remove
+    import facedyn.processors.model_steps as model_steps
 
     folder, models = corpus
     root, other = folder / "pucker_walk" / "take.usda", folder / "smile_walk" / "take.usda"
@@ -438,8 +437,8 @@ def test_retarget_streams_in_chunks_that_equal_the_whole_take(corpus, tmp_path, 
             assert cli("stabilize", take, "-o", take.parent / "stabilized.usdc", "--attach", take) == 0
             assert cli("remove", take, "--model", models / "f.removal", "-o", take.parent / "quasistatic.usdc", "--attach", take) == 0
     methods = {"synthesis": ("--model", models / "h.synthesis"), "delta-transfer": ("--method", "delta-transfer")}
-    for label, chunk in (("whole", remove.CHUNK_FRAMES), ("chunked", 16)):  # one chunk for this 1 s take, then several
-        monkeypatch.setattr(remove, "CHUNK_FRAMES", chunk)
+    for label, chunk in (("whole", model_steps.CHUNK_FRAMES), ("chunked", 16)):  # one chunk for this 1 s take, then several
+        monkeypatch.setattr(model_steps, "CHUNK_FRAMES", chunk)
         for name, flags in methods.items():
             assert cli("retarget", root, "--source", other, *flags, "-o", tmp_path / f"{name}.{label}.usdc") == 0
     for name in methods:

@@ -11,7 +11,7 @@ from facedyn.evaluation import stabilization_errors
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
 from facedyn.stabilize.rigidity import estimate_rigidity
-from facedyn.usd.corpus import build_corpus
+from facedyn.processors.corpus_writer import build_corpus
 from facedyn.usd.take import read_layers, read_take
 
 SPEC = TakeSpec("talk_walk", "walk", speech=True, duration_s=3.0, seed=5)

@@ -7,7 +7,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from facedyn.sim.default_face import RESOLUTION, default_face
-from facedyn.sim.rig import LANDMARK_NAMES
+from facedyn.rig import LANDMARK_NAMES
 
 ARKIT_SHAPES = {
     "jawOpen", "mouthSmile_L", "mouthSmile_R", "browInnerUp_L", "browInnerUp_R", "mouthPucker",

@@ -175,7 +175,7 @@ def test_the_shared_performances_are_within_the_speed_limit(shared_data):
 def test_held_expressions_find_arkit_names():
     """An ARKit-named rig (eyeBlinkLeft; one browInnerUp and cheekPuff) gets the same ten expressions."""
     from facedyn.sim.corpus import held_expressions, rig_recipe
-    from facedyn.sim.rig import FaceRig
+    from facedyn.rig import FaceRig
 
     rig = small_face()
 

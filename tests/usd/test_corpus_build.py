@@ -8,7 +8,8 @@ import pytest
 from facedyn.errors import FacedynError
 from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
-from facedyn.usd.corpus import CORPUS_INDEX, TAKE_RECIPE, build_corpus
+from facedyn.processors.corpus_writer import build_corpus
+from facedyn.usd.corpus import CORPUS_INDEX, TAKE_RECIPE
 from facedyn.usd.training_data import take_roots
 
 DEAD_PID = 2**22 + 7  # above Linux's pid_max: no process has it

@@ -7,7 +7,7 @@ import pytest
 from pxr import Sdf, Usd, UsdGeom, UsdSkel
 
 from facedyn.sim.default_face import default_face
-from facedyn.sim.rig import LANDMARK_NAMES
+from facedyn.rig import LANDMARK_NAMES
 from facedyn.usd.errors import TakeError
 from facedyn.usd.rig import read_blendshape_rig, write_blendshape_rig
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from facedyn.performance import Topology
-from facedyn.sim.rig import FaceRig, ShapeOffsets, rigid_falloff
+from facedyn.rig import FaceRig, ShapeOffsets, rigid_falloff
 
 
 def strip(length: int = 20, spacing: float = 0.25) -> tuple[np.ndarray, Topology]:

@@ -79,7 +79,7 @@ class Demo:
         return value
 
     def run(self) -> dict:
-        from facedyn.processors.simulate import load_rig
+        from facedyn.processors.corpus_writer import load_rig
         from facedyn.sim.corpus import protocol
 
         self.output.mkdir(parents=True, exist_ok=True)
@@ -101,7 +101,7 @@ class Demo:
             return self.run_on(rig, corpus)
 
     def simulate_corpus(self, corpus: Path, rig, specs, description: dict) -> None:
-        from facedyn.usd.corpus import build_corpus
+        from facedyn.processors.corpus_writer import build_corpus
 
         self.step(f"simulate corpus ({len(specs)} takes)", lambda: build_corpus(
             corpus, rig, specs, progress=self.progress, description=description, jobs=os.cpu_count() or 1))

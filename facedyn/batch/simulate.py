@@ -1,8 +1,8 @@
 """`simulate` on a Dask cluster: one task per take, the same corpus whatever the worker count.
 
 Each task simulates one take (seeded by its TakeSpec, so no result depends on which worker
-ran it or when) and writes it atomically with its recipe (facedyn.usd.corpus), so a corpus
-resumes and skips failing takes as `simulate` does; the index lists the takes in the order
+ran it or when) and writes it atomically with its recipe (facedyn.usd.corpus,
+facedyn.processors.corpus_writer), so a corpus resumes and skips failing takes as `simulate` does; the index lists the takes in the order
 of the specs. The rig goes to the workers once.
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from facedyn.batch.cluster import RETRIES
 from facedyn.errors import FacedynError
 from facedyn.progress import Progress
 from facedyn.sim.corpus import TakeSpec, simulate_take
-from facedyn.sim.rig import FaceRig
+from facedyn.rig import FaceRig
 from facedyn.sim.tissue import TissueParams
 
 
@@ -36,11 +36,12 @@ def simulate_and_write(output: Path, rig: FaceRig, spec: TakeSpec, tissue: Tissu
 
 def build_corpus_on(client, output: Path, rig: FaceRig, specs: list[TakeSpec], tissue: TissueParams | None = None,
                     progress: Progress | None = None, description: dict | None = None) -> dict:
-    """Simulate and write every take of `specs` on the cluster; return the corpus index (facedyn.usd.corpus's:
+    """Simulate and write every take of `specs` on the cluster; return the corpus index (build_corpus's:
     complete takes of an earlier run kept, failed takes skipped and recorded)."""
     from distributed import as_completed
 
-    from facedyn.usd.corpus import ResumedCorpus, corpus_folder
+    from facedyn.processors.corpus_writer import ResumedCorpus
+    from facedyn.usd.corpus import corpus_folder
 
     progress = progress or Progress.silent()
     output = corpus_folder(output).absolute()

@@ -1,8 +1,10 @@
-"""A blend-shape face rig as arrays: the simulator's source of true quasistatic shapes.
+"""A blend-shape face rig as arrays: an actor's neutral, masks and landmarks, and the simulator's shapes.
 
 A `FaceRig` is a neutral mesh plus expression offsets (driven by ARKit-style curves) and
-identity modes (which make new actors). It is plain NumPy: `facedyn.usd.rig` reads and
-writes it as a UsdSkel blend-shape rig, `facedyn.sim.default_face` builds one in code.
+identity modes (which make new actors). It is data, not simulation, and plain NumPy:
+`facedyn.usd.rig` reads and writes it as a UsdSkel blend-shape rig (so `actor` and the
+corpus files read a rig without loading the simulator), `facedyn.sim.default_face` builds
+one in code, and the simulator (`facedyn.sim`) drives it.
 
 Expression offsets are stored sparse, one `ShapeOffsets(indices, offsets)` per shape,
 because real rigs move only part of the face per shape; evaluation stacks them once into a
@@ -236,3 +238,11 @@ class FaceRig:
         actor_name = name or (f"{self.name}_actor{seed}" if seed is not None else f"{self.name}_actor")
         metadata = {**self.metadata, "base_rig": self.name, "identity_coefficients": c.tolist()}
         return replace(self, name=actor_name, neutral=neutral, metadata=metadata)
+
+
+def alignment_vertices(rig: FaceRig) -> np.ndarray | None:
+    """The rig's outer eye corners and under-nose vertex, when it names them."""
+    names = ("eye_corner_left", "eye_corner_right", "nose_base")
+    if not all(name in rig.landmarks for name in names):
+        return None
+    return np.array([rig.landmarks[name] for name in names], np.int32)
