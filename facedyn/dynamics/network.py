@@ -81,6 +81,24 @@ class Network(nn.Module):
         """The network's output in normalized units (what the loss compares)."""
         return self.layers((x - self.input_mean) / self.input_std)
 
+    def normalized_split(self, shared: torch.Tensor, items: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
+        """normalized(concat(shared[rows[k]], items[k])) for every k, as training needs it.
+
+        shared: (U, Ds), items: (B, Di), rows: (B,) indices into shared -> (B, outputs). The
+        first layer's shared part is computed once per row of `shared`, not once per item:
+        F's skull features are most of its inputs and the same for every skin sample of a
+        frame, so a batch whose pairs share frames costs a fraction of the pairs concatenated.
+        """
+        ds = shared.shape[-1]
+        if ds + items.shape[-1] != self.spec.inputs:
+            raise ValueError(f"inputs of sizes {ds} + {items.shape[-1]} do not add up to the network's {self.spec.inputs}")
+        first = self.layers[0]
+        per_row = nn.functional.linear((shared - self.input_mean[:ds]) / self.input_std[:ds], first.weight[:, :ds], first.bias)
+        h = nn.functional.linear((items - self.input_mean[ds:]) / self.input_std[ds:], first.weight[:, ds:]) + per_row[rows]
+        for layer in self.layers[1:]:
+            h = layer(h)
+        return h
+
     def normalize_targets(self, y: torch.Tensor) -> torch.Tensor:
         return (y - self.output_mean) / self.output_scale
 

@@ -3,7 +3,9 @@
 Every (frame, skin sample) pair of every take is one example: input [B(t), X_i(t)]
 (facedyn.dynamics.features; with ``sample_positions`` also the sample's rest position p_i),
 target the moving-average offset dx_i(t) (facedyn.dynamics.targets). L2 loss, Adam, lr 1e-3, batches of 10,000 pairs; the paper
-trains about 250 epochs.
+trains about 250 epochs. Beyond the paper, a batch's pairs come in pieces of 16 samples of
+one frame (PairSet.batches), so the skull features are put through the first layer once
+per piece rather than once per pair: the same loss, a third of the arithmetic.
 
 Beyond the paper (its future work: "augmenting the corpus with physical simulation"), a
 simulated corpus knows its true dynamics, and ``target="truth"`` trains on them instead.
@@ -28,18 +30,19 @@ import numpy as np
 import torch
 
 from facedyn.dynamics.face import FaceSetup
-from facedyn.dynamics.features import WINDOW, check_fps, compute_features
+from facedyn.dynamics.features import WINDOW, check_fps, skin_velocities, skull_velocities, span_windows
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import Network, NetworkSpec, removal_spec, resolve_device
-from facedyn.dynamics.removal import SAMPLE_POSITIONS, sample_positions, skin_inputs
+from facedyn.dynamics.removal import SAMPLE_POSITIONS, sample_positions
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.spikes import replace_spikes
-from facedyn.dynamics.store import StreamedExamples, TrainingStore
+from facedyn.dynamics.store import KEPT, WINDOW_INDEX, Moments, StreamedExamples, TrainingStore
 from facedyn.dynamics.targets import TARGET_WINDOW, dynamic_offsets
 from facedyn.performance import Performance
 
 TARGETS = ("moving-average", "truth")
+PIECE_SAMPLES = 16  # skin samples of one frame that train together in a batch (PairSet.batches)
 PREPARE_FRAMES = 1024  # frames of one take whose features are computed (and held) at once
 ProgressCallback = Callable[[int, float, "float | None"], None]  # (epoch, train loss, val loss) in cm^2
 
@@ -106,7 +109,12 @@ class TrainConfig:
 
 
 class Resident:
-    """An example set held in memory: one chunk, evaluated whole (see StreamedExamples)."""
+    """An example set held in memory: one chunk, evaluated whole (see StreamedExamples).
+
+    Subclasses have ``len`` and ``gather(indices) -> (inputs, targets)``; training draws
+    its batches through ``batches`` and predicts them with ``normalized``, which a set may
+    override to batch its examples in a cheaper shape (PairSet).
+    """
 
     def chunks(self, generator: torch.Generator | None = None):
         yield self
@@ -114,23 +122,77 @@ class Resident:
     def subset(self, max_examples: int, generator: torch.Generator):
         return self
 
+    def batches(self, subsample: float, batch_size: int, generator: torch.Generator, device: torch.device):
+        """(inputs, targets) batches over a random `subsample` of the examples, drawn afresh from `generator`."""
+        count = max(1, int(round(subsample * len(self))))
+        order = torch.randperm(len(self), generator=generator)[:count].to(device)
+        for start in range(0, count, batch_size):
+            yield self.gather(order[start: start + batch_size])
+
+    def normalized(self, network: Network, inputs) -> torch.Tensor:
+        """The network's normalized output for a batch's inputs (what the loss compares)."""
+        return network.normalized(inputs)
+
 
 class PairSet(Resident):
-    """Removal examples in memory: every (frame, sample) pair, input [B(t), X_i(t)], target dx_i(t)."""
+    """Removal examples in memory: every (frame, sample) pair, input [B(t), X_i(t)(, p_i)], target dx_i(t).
 
-    def __init__(self, skull: np.ndarray, skin: np.ndarray, targets: np.ndarray, device: torch.device):
-        self.samples = skin.shape[1]
+    X_i(t) is put together when a batch is gathered, from the frames' skin velocities and
+    each frame's window of them (TrainingStore.read_windows), never stored whole. Training
+    batches pair frames with pieces of PIECE_SAMPLES samples (`batches`), so the network
+    computes a frame's skull part once per piece (Network.normalized_split).
+    """
+
+    def __init__(self, skull: np.ndarray, velocities: np.ndarray, window: np.ndarray, targets: np.ndarray,
+                 positions: np.ndarray | None, device: torch.device):
+        """skull (F, Ds); velocities (V, S, 3) skin velocities of the frames the windows read;
+        window (F, 2w + 1) each frame's window into them; targets (F, S, 3); positions (S, 3) or None."""
+        self.samples = velocities.shape[1]
         self.skull = torch.from_numpy(skull).to(device)
-        self.skin = torch.from_numpy(skin).to(device)
+        self.velocities = torch.from_numpy(velocities).to(device)
+        self.window = torch.from_numpy(np.ascontiguousarray(window, np.int64)).to(device)
         self.targets = torch.from_numpy(targets).to(device)
+        self.positions = None if positions is None else torch.from_numpy(np.asarray(positions, np.float32)).to(device)
 
     def __len__(self) -> int:
         return len(self.skull) * self.samples
 
+    def skin(self, f: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
+        """(B, Di) skin inputs of pairs (f, s): the window of velocities, then the rest position."""
+        x = self.velocities[self.window[f], s[:, None]].reshape(len(f), -1)
+        return x if self.positions is None else torch.cat([x, self.positions[s]], dim=1)
+
     def gather(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         f = idx // self.samples
         s = idx % self.samples
-        return torch.cat([self.skull[f], self.skin[f, s]], dim=1), self.targets[f, s]
+        return torch.cat([self.skull[f], self.skin(f, s)], dim=1), self.targets[f, s]
+
+    def batches(self, subsample: float, batch_size: int, generator: torch.Generator, device: torch.device):
+        """((skull (U, Ds), skin (B, Di), frame of each pair (B,)), targets (B, 3)) batches.
+
+        Each frame gives a random `subsample` of its samples (drawn afresh every epoch),
+        cut into pieces of PIECE_SAMPLES; the pieces of all frames are shuffled and batches
+        of `batch_size` pairs taken in that order. A batch of 2,000 pairs therefore spans
+        about 125 frames, not 2,000: the skull part, most of F's inputs, is computed 16
+        times less often (Network.normalized_split), and a batch still sees many frames.
+        """
+        frames, samples = len(self.skull), self.samples
+        per_frame = min(samples, max(1, int(round(subsample * samples))))
+        pieces = -(-per_frame // PIECE_SAMPLES)
+        kept = torch.rand(frames, samples, generator=generator).argsort(dim=1)[:, :per_frame].reshape(-1)
+        piece_of_pair = torch.arange(frames)[:, None] * pieces + torch.arange(per_frame)[None, :] // PIECE_SAMPLES
+        rank = torch.randperm(frames * pieces, generator=generator)
+        order = torch.argsort(rank[piece_of_pair.reshape(-1)], stable=True).to(device)  # pairs, piece by piece
+        pair_frames = (torch.arange(frames * per_frame, device=device) // per_frame)
+        kept = kept.to(device)
+        for start in range(0, len(order), batch_size):
+            picked = order[start: start + batch_size]
+            f, s = pair_frames[picked], kept[picked]
+            unique, rows = torch.unique(f, return_inverse=True)
+            yield (self.skull[unique], self.skin(f, s), rows), self.targets[f, s]
+
+    def normalized(self, network: Network, inputs) -> torch.Tensor:
+        return network.normalized_split(*inputs)
 
 
 def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCallback | None = None) -> list[dict]:
@@ -152,17 +214,15 @@ def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCal
         network.train()
         total, drawn = 0.0, 0
         for chunk in train.chunks(generator):
-            count = max(1, int(round(config.subsample * len(chunk))))
-            order = torch.randperm(len(chunk), generator=generator)[:count].to(device)
-            for start in range(0, count, config.batch_size):
-                x, y = chunk.gather(order[start: start + config.batch_size])
-                loss = torch.mean((network.normalized(x) - network.normalize_targets(y)) ** 2)
+            for x, y in chunk.batches(config.subsample, config.batch_size, generator, device):
+                loss = torch.mean((chunk.normalized(network, x) - network.normalize_targets(y)) ** 2)
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 optimizer.step()
-                total += float(loss.detach()) * len(x)
-            drawn += count
-            del chunk, order, x, y  # the next chunk loads into this one's memory
+                count = y.numel() // y.shape[-1]
+                total += float(loss.detach()) * count
+                drawn += count
+            del chunk, x, y  # the next chunk loads into this one's memory
         train_loss = total / drawn * scale2
         val_loss = None if checked is None else mean_squared_error(network, checked, config.batch_size)
         curve.append({"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss})
@@ -220,8 +280,12 @@ def offset_errors(network: Network, examples, batch_size: int, unit: str) -> dic
     }
 
 
-def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig, backend: str) -> Iterator[dict[str, np.ndarray]]:
-    """A take's kept frames (away from its ends) as store rows, PREPARE_FRAMES at a time."""
+def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig) -> Iterator[dict[str, np.ndarray]]:
+    """A take's rows, PREPARE_FRAMES at a time: every frame, those away from its ends kept.
+
+    Columns: "skull" (B(t) or the skull motion input), "skin" (the samples' skull-space
+    velocities xdot_i(t), a windowed column the store turns into X_i(t)) and "targets".
+    """
     pts = check_points(take.points, f"take {take.name!r} points")
     if pts.shape[1] != face.point_count:
         raise ValueError(f"take {take.name!r} has {pts.shape[1]} points, the face setup {face.point_count}")
@@ -230,8 +294,12 @@ def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig, backe
         raise ValueError(f"take {take.name!r} has {f} frames, too few to leave out {config.trim} at each end")
     t, q = check_transforms(take.translate, take.orient, f)
     samples, _ = replace_spikes(skull_space(pts[:, face.samples], t, q, take.space))  # what F reads (removal does the same)
-    skull = None if config.skull_motion is None else config.skull_motion.features(t, q, face.landmarks, take.fps)
-    positions = sample_positions(face) if config.sample_positions else None
+    velocities = skin_velocities(samples, take.fps).astype(np.float32)
+    if config.skull_motion is None:  # the paper's B(t): windows of the landmarks' velocities (facedyn.dynamics.features)
+        landmark_velocities = skull_velocities(t, q, face.landmarks, take.fps).astype(np.float32)
+        skull = span_windows(landmark_velocities, config.window, config.window).reshape(f, -1)
+    else:
+        skull = config.skull_motion.features(t, q, face.landmarks, take.fps)
     if config.target == "truth":
         if take.dynamics is None:
             raise ValueError(f"take {take.name!r} has no known dynamics to train on (target 'truth' needs a simulated corpus)")
@@ -240,18 +308,22 @@ def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig, backe
         targets = take.dynamics  # sliced per chunk: a memory-mapped array stays on disk
     else:
         targets = dynamic_offsets(samples, space="skull", window=config.target_window).astype(np.float32)
-    for a in range(config.trim, f - config.trim, PREPARE_FRAMES):
-        b = min(f - config.trim, a + PREPARE_FRAMES)
-        feats = compute_features(samples, t, q, face.landmarks, take.fps, space="skull", window=config.window, frame_range=(a, b), backend=backend)
+    kept = np.zeros(f, bool)
+    kept[config.trim: f - config.trim] = True
+    for a in range(0, f, PREPARE_FRAMES):
+        b = min(f, a + PREPARE_FRAMES)
         chunk_targets = np.asarray(targets[a:b])
         if config.target == "truth":
             chunk_targets = chunk_targets[:, face.samples]
-        yield {"skull": feats.skull if skull is None else skull[a:b], "skin": skin_inputs(feats.skin, positions), "targets": chunk_targets}
+        yield {"skull": skull[a:b], "skin": velocities[a:b], "targets": chunk_targets, KEPT: kept[a:b]}
 
 
 def store_takes(takes: Iterable, prepare: Callable[[TrainingSequence], Iterator[dict[str, np.ndarray]]],
-                scratch: Path | str | None = None) -> tuple[TrainingStore, list[dict], float]:
+                scratch: Path | str | None = None, windows: dict[str, int] | None = None) -> tuple[TrainingStore, list[dict], float]:
     """(a store of every take's prepared rows, the takes' descriptions, their one frame rate).
+
+    A prepared chunk may say which of its rows are examples under store.KEPT; ``windows``
+    names the store's windowed columns (facedyn.dynamics.store.TrainingStore).
 
     ``takes`` may be any iterable of TrainingSequence objects or dicts, a generator included: each take
     is prepared and appended before the next is read, so a caller that reads takes lazily
@@ -272,9 +344,10 @@ def store_takes(takes: Iterable, prepare: Callable[[TrainingSequence], Iterator[
             if any(d["name"] == take.name for d in described):
                 raise ValueError(f"take names must be unique, got {take.name!r} twice")
             for arrays in prepare(take):
+                kept = arrays.pop(KEPT, None)
                 if store is None:
-                    store = TrainingStore({name: a.shape[1:] for name, a in arrays.items()}, scratch)
-                store.append(take.name, arrays)
+                    store = TrainingStore({name: a.shape[1:] for name, a in arrays.items()}, scratch, windows)
+                store.append(take.name, arrays, kept)
             described.append({"name": take.name, "frames": int(len(take.points)), "space": take.space})
             del value, take, arrays  # before the next take is read
         if not described:
@@ -309,14 +382,16 @@ def _split(names: list[str], validation: Sequence[str] | None) -> set[str]:
     return held
 
 
-def streamed_normalization(store: TrainingStore, names, inputs: Sequence[str], targets: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def streamed_normalization(store: TrainingStore, names, inputs: Sequence[str], targets: str,
+                           positions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(input mean, input std, target mean, target scale) over the named takes' rows.
 
     Input statistics are per feature, each input column's over its own rows (F's skull
-    features per frame, its skin features per (frame, sample) pair); targets get a mean per
-    coordinate and one common scale, the RMS of their deviation from it.
+    features per frame, its skin features per (frame, sample) pair), then F's sample
+    positions if it reads them (every frame has every sample: their moments over samples);
+    targets get a mean per coordinate and one common scale, the RMS of their deviation from it.
     """
-    stats = [store.moments(column, names) for column in inputs]
+    stats = [store.moments(column, names) for column in inputs] + ([Moments.of(positions)] if positions is not None else [])
     out = store.moments(targets, names)
     mean = np.concatenate([m.mean for m in stats])
     std = np.sqrt(np.concatenate([m.variance for m in stats]))
@@ -328,27 +403,29 @@ def train_removal(
     face: FaceSetup,
     config: TrainConfig | None = None,
     progress: ProgressCallback | None = None,
-    backend: str = "auto",
     *,
     scratch: Path | str | None = None,
 ) -> DynamicsModel:
     """Train network F on the takes (TrainingSequence objects or dicts, any iterable) for the given face setup.
 
     All takes must share one frame rate (the model's). Frames within ``config.trim`` of a
-    take's ends are left out (their targets average over clamped windows). ``backend``
-    picks the feature implementation (facedyn.kernels.runtime.choose_backend). The
-    examples go to a store in ``scratch`` (default: the system's temp folder), removed
+    take's ends are left out (their targets average over clamped windows). The skin
+    features are stored as per-frame velocities and put together per batch (NumPy, no
+    kernel needed). The examples go to a store in ``scratch`` (default: the system's temp folder), removed
     afterwards; at most ``config.resident_bytes`` of them are in memory at once.
     """
     config = config or TrainConfig()
     device = resolve_device(config.device)
-    store, described, fps = store_takes(takes, lambda take: _prepare(take, face, config, backend), scratch)
+    positions = sample_positions(face) if config.sample_positions else None
+    store, described, fps = store_takes(takes, lambda take: _prepare(take, face, config), scratch, {"skin": config.window})
     with store:
         samples = store.columns["skin"][0]
-        train, val = split_store(store, described, config, samples, lambda a: PairSet(a["skull"], a["skin"], a["targets"], device))
+        train, val = split_store(store, described, config, samples,
+                                 lambda a: PairSet(a["skull"], a["skin"], a[WINDOW_INDEX % "skin"], a["targets"], positions, device))
         names = [d["name"] for d in described if not d["validation"]]
-        spec: NetworkSpec = removal_spec(store.columns["skull"][0], store.columns["skin"][1])
-        normalization = streamed_normalization(store, names, ("skull", "skin"), "targets")
+        skin_features = store.feature_width("skin") + (0 if positions is None else 3)
+        spec: NetworkSpec = removal_spec(store.columns["skull"][0], skin_features)
+        normalization = streamed_normalization(store, names, ("skull", "skin"), "targets", positions)
         network, curve = fit_new_network(spec, normalization, train, val, config, device, progress)
         errors = offset_errors(network, val, config.batch_size, "pairs") if val is not None else None
     network.cpu()

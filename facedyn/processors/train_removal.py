@@ -63,7 +63,7 @@ class TrainRemovalProcessor(Processor):
         if truths is not None:
             training = [replace(take, dynamics=truths[take.name].offsets) for take in training]
         on_epoch, last = epoch_reporter(progress, f"train F ({len(takes)} takes)", config.epochs)
-        model = train_removal(training, face, config, on_epoch, backend=params["backend"])
+        model = train_removal(training, face, config, on_epoch)
         progress.finish()
         model.info.update(frame)
         model.info["training"]["skull"] = params["skull"]

@@ -23,6 +23,7 @@ from functools import partial
 from pathlib import Path
 
 from facedyn.errors import UsageError
+from facedyn.performance import BACKENDS
 from facedyn.processors.base import FileOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.processors.training_inputs import (TRAINING_PARAMETERS, check_session_lengths, epoch_reporter, load_takes, read_truths,
                                                  training_face, training_summary, validation_names)
@@ -53,6 +54,7 @@ class TrainSynthesisProcessor(Processor):
                   "H's skull input: landmark accelerations over t-30..t+10 (beyond the paper), or the paper's velocities over t-10..t+10 "
                   "(calibrating: the model's own)",
                   ("acceleration", "velocity")),
+        Parameter("backend", str, "auto", "stretch and feature kernels", BACKENDS),
         *TRAINING_PARAMETERS,
     )
 

@@ -5,7 +5,6 @@ import fnmatch
 from pathlib import Path
 
 from facedyn.errors import UsageError
-from facedyn.performance import BACKENDS
 from facedyn.processors.base import Parameter, check_device
 from facedyn.progress import Progress
 
@@ -17,7 +16,6 @@ TRAINING_PARAMETERS = (
     Parameter("exclude", str, "", "leave out takes whose name matches one of these comma-separated glob patterns", metavar="PATTERNS"),
     Parameter("seed", int, 0, "seed of the network's initialization and the epochs' sampling", minimum=0, maximum=2**32 - 1),
     Parameter("device", str, "auto", "torch device: auto, cpu, cuda, cuda:N", check=check_device),
-    Parameter("backend", str, "auto", "feature and stretch kernels", BACKENDS),
     Parameter("actor", Path, None, "the actor asset whose skin samples, landmarks and rigid region the model uses (default: "
               "the one the takes' roots record, else the first take's own)", metavar="ACTOR"),
 )

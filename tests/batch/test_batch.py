@@ -50,7 +50,7 @@ def shots(tmp_path_factory, rig):
     (folder / "broken.usdc").write_bytes(b"not a usd file")
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, sample_count=16)
     takes = [TrainingSequence(s.spec.name, s.captured, s.fps, s.skull_translate, s.skull_orient, "skull", s.offsets) for s in sims]
-    save_model(train_removal(takes, face, TrainConfig(epochs=1, trim=5, target="truth"), backend="numpy"), folder / "actor.removal")
+    save_model(train_removal(takes, face, TrainConfig(epochs=1, trim=5, target="truth")), folder / "actor.removal")
     truth = {s.spec.name: s.quasistatic for s in sims}
     save_model(train_synthesis(takes, face, rig.uvs, truth, synthesis_config(epochs=1, trim=5), backend="numpy"), folder / "actor.synthesis")
     return folder

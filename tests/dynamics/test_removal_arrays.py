@@ -55,7 +55,7 @@ def trained(corpus):
     face, takes, _ = corpus
     config = TrainConfig(epochs=30, batch_size=1000, validation=("platform_3",), seed=0)
     curve = []
-    model = train_removal(takes, face, config, progress=lambda e, tr, va: curve.append((e, tr, va)), backend="numpy")
+    model = train_removal(takes, face, config, progress=lambda e, tr, va: curve.append((e, tr, va)))
     return model, curve
 
 
@@ -71,8 +71,8 @@ def test_training_reaches_a_low_validation_error(trained):
 def test_training_is_seeded(corpus):
     face, takes, _ = corpus
     config = TrainConfig(epochs=2, batch_size=2000, subsample=0.5, seed=3)
-    a = train_removal(takes[:2], face, config, backend="numpy")
-    b = train_removal(takes[:2], face, config, backend="numpy")
+    a = train_removal(takes[:2], face, config)
+    b = train_removal(takes[:2], face, config)
     assert a.info["loss_curve"] == b.info["loss_curve"]
 
 
@@ -116,7 +116,7 @@ def test_acceleration_input_trains_and_removes_in_chunks(corpus):
     and chunked removal slices the whole take's skull features exactly."""
     face, takes, _ = corpus
     config = TrainConfig(epochs=2, batch_size=1000, validation=("platform_3",), skull_motion=SkullMotionInput())
-    model = train_removal(takes, face, config, backend="numpy")
+    model = train_removal(takes, face, config)
     assert model.skull_motion == SkullMotionInput() and model.network.spec.inputs == 5 * 41 * 3 + 63
     take = takes[0]
     _, whole = remove_dynamics(take["points"], take["translate"], take["orient"], FPS, model, "numpy", space="world", chunk_frames=1000)
@@ -168,7 +168,7 @@ def test_true_targets_recover_slow_dynamics_the_moving_average_cannot_see(corpus
     errors = {}
     for target in ("moving-average", "truth"):
         config = TrainConfig(epochs=30, batch_size=1000, validation=(held.name,), seed=0, target=target)
-        model = train_removal(takes, face, config, backend="numpy")
+        model = train_removal(takes, face, config)
         _, removed = remove_dynamics(held.points, held.translate, held.orient, FPS, model, "numpy")
         inner = slice(20, -20)
         errors[target] = np.sqrt(np.mean((removed[inner] - held.dynamics[inner]) ** 2)) / np.sqrt(np.mean(held.dynamics[inner] ** 2))
@@ -181,7 +181,7 @@ def test_true_targets_need_known_dynamics(corpus):
     with pytest.raises(ValueError, match="target must be one of"):
         TrainConfig(target="median")
     with pytest.raises(ValueError, match="has no known dynamics"):
-        train_removal(takes[:2], face, TrainConfig(epochs=1, target="truth"), backend="numpy")
+        train_removal(takes[:2], face, TrainConfig(epochs=1, target="truth"))
     wrong = dict(takes[0], dynamics=np.zeros((3, face.point_count, 3), np.float32))
     with pytest.raises(ValueError, match="dynamics are"):
-        train_removal([wrong, takes[1]], face, TrainConfig(epochs=1, target="truth"), backend="numpy")
+        train_removal([wrong, takes[1]], face, TrainConfig(epochs=1, target="truth"))

@@ -39,7 +39,7 @@ def removal_error(face, takes, positions: bool) -> tuple[float, object]:
     held = takes[-1]
     config = TrainConfig(epochs=20, batch_size=1000, validation=(held.name,), seed=0, target="truth",
                          skull_motion=SkullMotionInput(), sample_positions=positions)
-    model = train_removal(takes, face, config, backend="numpy")
+    model = train_removal(takes, face, config)
     _, removed = remove_dynamics(held.points, held.translate, held.orient, FPS, model, "numpy")
     inner = slice(20, -20)
     error = np.sqrt(np.mean((removed[inner] - held.dynamics[inner]) ** 2)) / np.sqrt(np.mean(held.dynamics[inner] ** 2))

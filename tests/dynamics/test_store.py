@@ -12,7 +12,7 @@ from facedyn.dynamics import training
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.features import compute_features
 from facedyn.dynamics.skull import to_world
-from facedyn.dynamics.store import BLOCK_FRAMES, Moments, StreamedExamples, TrainingStore, moments_of
+from facedyn.dynamics.store import BLOCK_FRAMES, WINDOW_INDEX, Moments, StreamedExamples, TrainingStore, moments_of
 from facedyn.dynamics.training import PairSet, TrainingSequence, TrainConfig, train_removal
 
 FPS = 120.0
@@ -80,21 +80,59 @@ def test_chunks_hand_out_every_example_once_in_a_seeded_order(tmp_path):
         assert whole.resident and [c.tolist() for c in whole.chunks(torch.Generator())] == [list(range(10, rows))]
 
 
-def test_prepared_rows_equal_the_whole_take_features(corpus, monkeypatch):
-    """A take prepared in chunks of frames stores exactly the features of the whole take."""
+@pytest.mark.parametrize("resident", [1 << 30, 60_000])
+def test_gathered_pairs_equal_the_whole_take_features(corpus, monkeypatch, tmp_path, resident):
+    """Takes prepared in chunks of frames, stored as per-frame velocities and gathered back
+    as pairs, in memory or in chunks, give exactly the paper's features of each whole take,
+    and the store's moments are those of the features."""
     face, takes = corpus
-    take = takes[0]
     monkeypatch.setattr(training, "PREPARE_FRAMES", 50)
-    config = TrainConfig()
-    chunks = list(training._prepare(take, face, config, "numpy"))
-    assert len(chunks) == 5
-    skull = np.concatenate([c["skull"] for c in chunks])
-    skin = np.concatenate([c["skin"] for c in chunks])
-    samples = take.points[:, face.samples]
-    whole = compute_features(samples, take.translate, take.orient, face.landmarks, FPS, space="world", backend="numpy")
-    keep = slice(config.trim, len(samples) - config.trim)
-    np.testing.assert_allclose(skull, whole.skull[keep], atol=1e-4)
-    np.testing.assert_allclose(skin, whole.skin[keep], atol=1e-3)
+    config = TrainConfig(sample_positions=True, resident_bytes=resident)
+    positions = training.sample_positions(face)
+    names = [t.name for t in takes[:2]]
+    store, _, _ = training.store_takes(takes[:2], lambda take: training._prepare(take, face, config), tmp_path, {"skin": config.window})
+    with store:
+        examples = StreamedExamples(store, store.rows_of(names), len(face.samples),
+                                    lambda a: PairSet(a["skull"], a["skin"], a[WINDOW_INDEX % "skin"], a["targets"], positions,
+                                                      torch.device("cpu")), resident)
+        assert examples.resident == (resident > 1e6)
+        got = np.concatenate([chunk.gather(torch.arange(len(chunk)))[0].numpy() for chunk in examples.chunks()])
+        moments = store.moments("skin", names)
+    expected = []
+    for take in takes[:2]:
+        whole = compute_features(take.points[:, face.samples], take.translate, take.orient, face.landmarks, FPS, space="world", backend="numpy")
+        keep = slice(config.trim, len(take.points) - config.trim)
+        skull, skin = whole.skull[keep], whole.skin[keep]
+        pairs = np.concatenate([np.repeat(skull[:, None], skin.shape[1], 1), skin, np.broadcast_to(positions, skin.shape[:2] + (3,))], -1)
+        expected.append(pairs.reshape(-1, pairs.shape[-1]))
+    expected = np.concatenate(expected)
+    np.testing.assert_allclose(got, expected, atol=1e-3)
+    skin = expected[:, skull.shape[1]: -3].astype(np.float64)
+    assert moments.count == len(skin)
+    np.testing.assert_allclose(moments.mean, skin.mean(axis=0), atol=1e-6)
+    np.testing.assert_allclose(np.sqrt(moments.variance), skin.std(axis=0), rtol=1e-4, atol=1e-6)
+
+
+def test_training_batches_draw_each_pair_once_and_split_equals_concatenated():
+    """A full epoch's batches hold every (frame, sample) pair exactly once, and the split
+    first layer predicts what the concatenated inputs predict."""
+    rng = np.random.default_rng(4)
+    frames, samples, w = 40, 37, 2
+    velocities = rng.normal(size=(frames + 1, samples, 3)).astype(np.float32)
+    window = np.clip(np.arange(frames)[:, None] + np.arange(-w, w + 1)[None, :], 0, frames)
+    pairs = PairSet(rng.normal(size=(frames, 5)).astype(np.float32), velocities, window, rng.normal(size=(frames, samples, 3)).astype(np.float32),
+                    rng.normal(size=(samples, 3)).astype(np.float32), torch.device("cpu"))
+    seen = []
+    network = training.Network(training.removal_spec(5, (2 * w + 1) * 3 + 3))
+    for (skull, skin, rows), targets in pairs.batches(1.0, 100, torch.Generator().manual_seed(0), torch.device("cpu")):
+        assert len(skin) == len(targets) <= 100 and len(skull) < len(skin)
+        joined = torch.cat([skull[rows], skin], dim=1)
+        torch.testing.assert_close(network.normalized_split(skull, skin, rows), network.normalized(joined), rtol=1e-5, atol=1e-6)
+        seen.extend(map(tuple, joined.numpy().round(5).tolist()))
+    everything = pairs.gather(torch.arange(len(pairs)))[0].numpy().round(5)
+    assert sorted(seen) == sorted(map(tuple, everything.tolist()))
+    half = sum(len(t) for _, t in pairs.batches(0.5, 100, torch.Generator().manual_seed(0), torch.device("cpu")))
+    assert half == frames * round(0.5 * samples)
 
 
 @pytest.mark.slow  # trains F for 20 epochs three times
@@ -105,7 +143,7 @@ def test_streamed_training_matches_training_in_memory(corpus, tmp_path):
     models = {}
     for label, resident in (("memory", 1 << 30), ("streamed", 1 << 20)):
         config = TrainConfig(epochs=20, batch_size=1000, validation=("platform_3",), seed=0, resident_bytes=resident)
-        models[label] = train_removal(takes, face, config, backend="numpy", scratch=tmp_path)
+        models[label] = train_removal(takes, face, config, scratch=tmp_path)
     memory, streamed = models["memory"], models["streamed"]
     for name in ("input_mean", "input_std", "output_mean", "output_scale"):
         torch.testing.assert_close(getattr(memory.network, name), getattr(streamed.network, name))
@@ -115,8 +153,7 @@ def test_streamed_training_matches_training_in_memory(corpus, tmp_path):
     assert a["rms_cm"] < 0.1 * a["zero_offset_rms_cm"] and b["rms_cm"] < 0.1 * b["zero_offset_rms_cm"], (a, b)
     assert b["rms_cm"] == pytest.approx(a["rms_cm"], rel=0.15)  # measured: 3% apart
     assert list(tmp_path.iterdir()) == []  # the stores are gone
-    again = train_removal(takes, face, TrainConfig(epochs=20, batch_size=1000, validation=("platform_3",), seed=0, resident_bytes=1 << 20),
-                          backend="numpy")
+    again = train_removal(takes, face, TrainConfig(epochs=20, batch_size=1000, validation=("platform_3",), seed=0, resident_bytes=1 << 20))
     for p, q in zip(streamed.network.parameters(), again.network.parameters()):
         torch.testing.assert_close(p, q, rtol=0, atol=0)  # streamed training is seeded too
 
@@ -135,14 +172,20 @@ def test_a_take_generator_is_read_one_take_at_a_time(corpus):
             yield copy
             del copy
 
-    model = train_removal(lazily(), face, TrainConfig(epochs=1, batch_size=1000), backend="numpy")
+    model = train_removal(lazily(), face, TrainConfig(epochs=1, batch_size=1000))
     assert [t["name"] for t in model.info["training"]["takes"]] == [t.name for t in takes]
 
 
 def test_pairset_gathers_frame_and_sample_inputs():
     rng = np.random.default_rng(3)
-    skull, skin, targets = (rng.normal(size=s).astype(np.float32) for s in ((5, 2), (5, 3, 4), (5, 3, 3)))
-    pairs = PairSet(skull, skin, targets, torch.device("cpu"))
+    skull, targets = rng.normal(size=(5, 2)).astype(np.float32), rng.normal(size=(5, 3, 3)).astype(np.float32)
+    velocities = rng.normal(size=(7, 3, 3)).astype(np.float32)
+    window = np.array([[6, 0, 1], [0, 1, 2], [1, 2, 3], [2, 3, 4], [3, 4, 6]])  # 6: beyond the take (zero)
+    velocities[6] = 0
+    positions = rng.normal(size=(3, 3)).astype(np.float32)
+    pairs = PairSet(skull, velocities, window, targets, positions, torch.device("cpu"))
     x, y = pairs.gather(torch.tensor([0, 4, 14]))
-    np.testing.assert_array_equal(x.numpy(), np.concatenate([skull[[0, 1, 4]], skin[[0, 1, 4], [0, 1, 2]]], axis=1))
-    np.testing.assert_array_equal(y.numpy(), targets[[0, 1, 4], [0, 1, 2]])
+    f, s = np.array([0, 1, 4]), np.array([0, 1, 2])
+    skin = velocities[window[f], s[:, None]].reshape(3, -1)
+    np.testing.assert_array_equal(x.numpy(), np.concatenate([skull[f], skin, positions[s]], axis=1))
+    np.testing.assert_array_equal(y.numpy(), targets[f, s])
