@@ -55,6 +55,7 @@ class TrainingSequence:
     orient: np.ndarray | None = None  # (F, 4) (w, x, y, z); None = identity
     space: str = "skull"
     dynamics: np.ndarray | None = None  # (F, N, 3) known secondary dynamics, skull frame (a simulated take's truth)
+    face: FaceSetup | None = None  # the take's own face setup (a person-independent corpus of many faces); None: the model's
 
     @classmethod
     def coerce(cls, value) -> "TrainingSequence":
@@ -221,7 +222,8 @@ def offset_errors(network: Network, examples, batch_size: int, unit: str) -> dic
 
 
 def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig, backend: str) -> Iterator[dict[str, np.ndarray]]:
-    """A take's kept frames (away from its ends) as store rows, PREPARE_FRAMES at a time."""
+    """A take's kept frames (away from its ends) as store rows, PREPARE_FRAMES at a time (on its own face setup if it has one)."""
+    face = take.face or face
     pts = check_points(take.points, f"take {take.name!r} points")
     if pts.shape[1] != face.point_count:
         raise ValueError(f"take {take.name!r} has {pts.shape[1]} points, the face setup {face.point_count}")

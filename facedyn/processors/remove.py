@@ -40,7 +40,8 @@ class RemoveProcessor(Processor):
     writes = Writes("layer", role="quasistatic", help="the quasistatic layer to write (.usdc)")
     parameters = (
         Parameter("model", Path, help="the removal model file (from train-removal), an actor's linear response "
-                  "(.response, train-synthesis --response linear) or a blend of them (calibrate's removal.blend)", metavar="MODEL"),
+                  "(.response, train-synthesis --response linear), a blend of them (calibrate's removal.blend), or `default`: "
+                  "the shipped person-independent removal model, for an actor with neither rig nor session", metavar="MODEL"),
         Parameter("blend", Path, None, "a second removal model or linear response: remove the mean of the two models' dynamics",
                   metavar="MODEL"),
         Parameter("backend", str, "auto", "feature and Laplacian kernels", BACKENDS),
@@ -54,7 +55,8 @@ class RemoveProcessor(Processor):
         if params["blend"] is not None:
             models += removal_models(params["blend"], "blend", reader.head, reader.fps, request.inputs[0])
         description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "model": str(params["model"]),
-                       "blend": str(params["blend"] or ""), "samples": int(len(models[0].face.samples))}
+                       "blend": str(params["blend"] or ""), "samples": int(len(models[0].face.samples)),
+                       **{f"face_{key}": models[0].info[key] for key in ("rest", "facing") if key in models[0].info}}  # a per-take setup's
         return Plan(description, (reader, models, params))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
@@ -94,14 +96,17 @@ def removal_models(path: Path, flag: str, perf, fps: float, take: Path) -> list:
     """The models a removal file holds (one, or a blend's members) that fit the take: removal
     models (F) and linear responses, never a synthesis network."""
     from facedyn.dynamics.modelfile import load_models
+    from facedyn.dynamics.portable import for_take, is_portable
+    from facedyn.models import resolve_model
 
+    path = resolve_model(path, flag)
     models = load_models(path, topology=perf.topology, fps=fps)
     for model in models:
         if model.kind not in REMOVES:
             raise UsageError(f"--{flag} {path}: a synthesis model (network H), which reads the quasistatic shape it would "
                              "make; this needs a removal model (F), an actor's linear response (.response) or a blend of them")
         check_skull_frame(take, perf, path, model)
-    return models
+    return [for_take(model, perf) if is_portable(model) else model for model in models]
 
 
 def removal_of(points, translate, orient, fps: float, model, backend: str = "auto", device: str = "auto") -> tuple[np.ndarray, np.ndarray]:
@@ -174,8 +179,10 @@ def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:
 
 
 def model_inputs(source, *model_paths: Path) -> list[str]:
-    """The provenance inputs of a layer computed from a take and model files."""
-    return list(source.inputs) + [str(Path(path).resolve()) for path in model_paths]
+    """The provenance inputs of a layer computed from a take and model files (a shipped model's name as its file)."""
+    from facedyn.models import resolve_model
+
+    return list(source.inputs) + [str(resolve_model(path).resolve()) for path in model_paths]
 
 
 class OffsetStats:
