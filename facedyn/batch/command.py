@@ -27,7 +27,7 @@ def add_batch_arguments(parser) -> None:
     parser.add_argument("-o", "--output", type=Path, required=True, metavar="OUTDIR", help="folder of the takes (OUTDIR/<name>/take.usda)")
     parser.add_argument("--steps", default=",".join(STEPS), help=f"comma-separated steps, in order (default: {','.join(STEPS)})")
     parser.add_argument("--actor", metavar="A", help="an actor asset (usdfacedyn actor): stabilize puts every take in its skull frame")
-    parser.add_argument("--model", type=Path, metavar="F", help="removal model for the remove step")
+    parser.add_argument("--model", type=Path, metavar="F", help="removal model for the remove step (`default`: the shipped person-independent one)")
     parser.add_argument("--synthesis-model", type=Path, metavar="H", help="synthesis model for the synthesize step")
     parser.add_argument("--skull-motion", metavar="M", help="new skull motion for synthesize: BVH, stabilized take, or walk|run|hop|still|platform:9hz")
     where = parser.add_mutually_exclusive_group()
@@ -39,8 +39,10 @@ def add_batch_arguments(parser) -> None:
 
 
 def models_from(args) -> Models:
+    from facedyn.models import resolve_model
+
     return Models(
-        removal=Path(args.model) if args.model else None,
+        removal=resolve_model(args.model) if args.model else None,  # a shipped model's name (default) as its file
         synthesis=Path(args.synthesis_model) if args.synthesis_model else None,
         skull_motion=args.skull_motion,
         actor=Path(args.actor) if args.actor else None,
