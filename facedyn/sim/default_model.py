@@ -81,6 +81,8 @@ def corpus_takes(faces, args, record: dict):
         setup, frame = face_setup(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, uvs=rig.uvs)
         specs = face_takes(rig, args.seed + 100 * (k + 1), args.data, args.volumetric_every)
         done = {spec.name: (take, error) for spec, take, error in corpus.simulate_each(rig, specs, jobs=args.jobs)}
+        failed = sum(take is None for take, _ in done.values())
+        print(f"{description['name']}: {len(specs) - failed} takes simulated, {failed} failed", file=sys.stderr, flush=True)
         for spec in specs:  # in the specs' order, whatever order the workers finished in
             take, error = done[spec.name]
             if take is None:
