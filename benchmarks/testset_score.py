@@ -1,12 +1,14 @@
 """Score removals on a test-set actor's test takes (benchmarks/README-testset.md); one JSON file per run.
 
-    .venv/bin/python benchmarks/testset_score.py ACTOR_FOLDER [--removal MODEL [--blend MODEL]] [--work DIR] [--results DIR]
+    .venv/bin/python benchmarks/testset_score.py ACTOR_FOLDER [--removal MODEL [--blend MODEL]] [--work DIR] [--results DIR] [--no-actor]
 
 Per test take: `usdfacedyn actor rig.usda`, then `import` + `stabilize --actor` of
 tracked.usdc (the console as a user runs it), and the figures (fraction of the true
 dynamics' RMS left, testset.score): do_nothing (1.0), moving_average (21 frames, on the
 stabilized take) and, with --removal, `usdfacedyn remove --model MODEL [--blend MODEL]`.
-The run's figures, with commit, date and machine, go to RESULTS/<actor>-<UTC time>.json
+With --no-actor the takes are stabilized without `--actor` (an actor with nothing: the
+take's own skull frame, which testset.score.frame_rotation turns into the actor's to score).
+MODEL may be a shipped model's name (`default`). The run's figures, with commit, date and machine, go to RESULTS/<actor>-<UTC time>.json
 (default benchmarks/results/testset/) and to stdout, one JSON object per take.
 """
 from __future__ import annotations
@@ -21,6 +23,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 from plain_capture import stabilize_with_cli, usdfacedyn
 
 REPO = Path(__file__).resolve().parents[1]
@@ -33,11 +37,12 @@ def commit() -> str:
 
 def main() -> None:
     from facedyn.usd.take import read_layers, read_take
-    from testset.score import dynamics_rms_mm, fraction_left, load_truth, moving_average_estimate
+    from testset.score import dynamics_rms_mm, fraction_left, frame_rotation, load_truth, moving_average_estimate
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("actor", type=Path, help="an actor folder written by testset_generate.py")
-    parser.add_argument("--removal", type=Path, help="a removal model to score (usdfacedyn remove --model)")
+    parser.add_argument("--removal", type=Path, help="a removal model to score (usdfacedyn remove --model; `default`: the shipped one)")
+    parser.add_argument("--no-actor", action="store_true", help="stabilize without --actor (in the take's own skull frame)")
     parser.add_argument("--blend", type=Path, help="with --removal: remove --blend (a linear response)")
     parser.add_argument("--work", type=Path, help="keep the imported takes here (default: a temporary folder)")
     parser.add_argument("--results", type=Path, default=REPO / "benchmarks" / "results" / "testset")
@@ -51,7 +56,8 @@ def main() -> None:
         sys.exit(f"{args.actor}: has no test takes (generate it with --takes test)")
     run = {"actor": info["actor"]["name"], "split": info["actor"]["split"], "commit": commit(),
            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
-           "cpus": os.cpu_count(), "removal": args.removal and str(args.removal), "blend": args.blend and str(args.blend), "takes": []}
+           "cpus": os.cpu_count(), "removal": args.removal and str(args.removal), "blend": args.blend and str(args.blend),
+           "stabilized": "without --actor" if args.no_actor else "with --actor", "takes": []}
     with tempfile.TemporaryDirectory(prefix="facedyn-testset-") as scratch:
         work = args.work or Path(scratch)
         work.mkdir(parents=True, exist_ok=True)
@@ -60,18 +66,19 @@ def main() -> None:
             usdfacedyn("actor", str(args.actor / "rig.usda"), "-o", str(actor))
         for name in tests:
             truth = load_truth(args.actor, name)
-            folder = work / name
+            folder = work / (f"{name}_no_actor" if args.no_actor else name)
             if not (folder / "take.usda").is_file():
                 folder.mkdir(parents=True, exist_ok=True)
-                stabilize_with_cli(args.actor / "takes" / name / "tracked.usdc", folder, actor)
+                stabilize_with_cli(args.actor / "takes" / name / "tracked.usdc", folder, None if args.no_actor else actor)
             stabilized, _ = read_take(folder / "take.usda")
+            turn = frame_rotation(stabilized.points, truth) if args.no_actor else np.eye(3)  # estimates into the actor's frame
             case = {"take": name, "frames": len(truth["dynamics"]), "dynamics_rms_mm": round(dynamics_rms_mm(truth), 3), "do_nothing": 1.0,
-                    "moving_average": round(fraction_left(moving_average_estimate(stabilized.points, truth), truth), 4)}
+                    "moving_average": round(fraction_left(moving_average_estimate(stabilized.points, truth) @ turn.T, truth), 4)}
             if args.removal is not None:
                 layer = folder / "quasistatic.usdc"
                 usdfacedyn("remove", str(folder / "take.usda"), "-o", str(layer), "--model", str(args.removal),
                            *(("--blend", str(args.blend)) if args.blend else ()))
-                case["removal"] = round(fraction_left(read_layers([layer, folder / "take.usda"]).offsets, truth), 4)
+                case["removal"] = round(fraction_left(read_layers([layer, folder / "take.usda"]).offsets @ turn.T, truth), 4)
             print(json.dumps(case), flush=True)
             run["takes"].append(case)
     dialogs = [c for c in run["takes"] if c["take"].startswith("dialog")]

@@ -154,11 +154,14 @@ def _cmd_env(args) -> int:
 def _cmd_inspect(args) -> int:
     from facedyn.io.files import check_not_special
 
+    from facedyn.models import SHIPPED, resolve_model
+
     check_not_special(args.path)
-    if args.path.is_file() and not args.path.suffix.lower().startswith(".usd"):
+    path = resolve_model(args.path, "inspect") if str(args.path) in SHIPPED else args.path
+    if path.is_file() and not path.suffix.lower().startswith(".usd"):
         from facedyn.dynamics.modelfile import describe_model
 
-        model = describe_model(args.path)
+        model = describe_model(path)
         print(json.dumps(model, indent=2, default=str) if args.json else "\n".join(f"{k}: {v}" for k, v in model.items()))
         return EXIT_OK
     from facedyn.usd.inspect import describe_take, format_description

@@ -5,6 +5,8 @@ The same figure as bench_cross_sim.py and the issue's targets: RMS over the scor
 divided by the RMS of the true dynamics (facedyn.evaluation.residual_fraction): doing nothing
 (estimating no dynamics) scores 100 %. Estimates are skull-space offsets in the actor's frame
 (a take stabilized with `--actor` from the actor's rig.usda), as a quasistatic layer holds them.
+A take stabilized without `--actor` is in its own skull frame: its estimates are turned into
+the actor's by `frame_rotation` first.
 """
 from __future__ import annotations
 
@@ -30,6 +32,18 @@ def fraction_left(estimate: np.ndarray, truth: dict) -> float:
     if estimate.shape != dynamics.shape:
         raise ValueError(f"the estimate has shape {estimate.shape}, the truth {dynamics.shape} (frames, points, 3)")
     return residual_fraction(estimate, dynamics, dynamics, truth["face_vertices"])["fraction"]
+
+
+def frame_rotation(stabilized_points: np.ndarray, truth: dict) -> np.ndarray:
+    """(3, 3) A: the rotation from a take's own skull frame (stabilized without --actor) to the
+    actor's, one least-squares fit (Kabsch) of every frame's stabilized points to the true
+    captured skin; a vector v of the take's frame is A v in the actor's."""
+    ours = np.asarray(stabilized_points, dtype=np.float64).reshape(-1, 3)
+    theirs = np.asarray(truth["captured"], dtype=np.float64).reshape(-1, 3)
+    ours, theirs = ours - ours.mean(axis=0), theirs - theirs.mean(axis=0)
+    u, _, vt = np.linalg.svd(theirs.T @ ours)
+    d = np.sign(np.linalg.det(u @ vt))
+    return u @ np.diag([1.0, 1.0, d]) @ vt
 
 
 def moving_average_estimate(stabilized_points: np.ndarray, truth: dict) -> np.ndarray:

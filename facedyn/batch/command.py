@@ -30,7 +30,7 @@ def add_batch_arguments(parser) -> None:
     parser.add_argument("--steps", default=",".join(STEPS), help=f"comma-separated steps, in order (default: {','.join(STEPS)})")
     parser.add_argument("--actor", metavar="A", help="an actor asset (usdfacedyn actor): stabilize puts every take in its skull frame")
     parser.add_argument("--removal-model", type=Path, metavar="F", help="removal model for the remove step (its --model): network F, "
-                        "an actor's linear response or a blend")
+                        "an actor's linear response, a blend, or `default` (the shipped person-independent one)")
     parser.add_argument("--model", type=Path, metavar="F", help="deprecated alias of --removal-model")
     parser.add_argument("--synthesis-model", type=Path, metavar="H", help="synthesis model for the synthesize step")
     parser.add_argument("--skull-motion", metavar="M", help="new skull motion for synthesize: BVH, stabilized take, or walk|run|hop|still|platform:9hz")
@@ -43,6 +43,8 @@ def add_batch_arguments(parser) -> None:
 
 
 def models_from(args) -> Models:
+    from facedyn.models import resolve_model
+
     removal = args.removal_model
     if args.model is not None:
         if removal is not None:
@@ -50,7 +52,7 @@ def models_from(args) -> Models:
         print("usdfacedyn: batch --model is deprecated and will be removed; use --removal-model (the same model)", file=sys.stderr)
         removal = args.model
     return Models(
-        removal=Path(removal) if removal else None,
+        removal=resolve_model(removal) if removal else None,  # a shipped model's name (default) as its file
         synthesis=Path(args.synthesis_model) if args.synthesis_model else None,
         skull_motion=args.skull_motion,
         actor=Path(args.actor) if args.actor else None,

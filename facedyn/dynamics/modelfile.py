@@ -85,6 +85,7 @@ FRAME_BYTES_FLOOR = 64 << 20  # what applying any model may allocate for one fra
 _SAMPLE_POSITIONS = "sample_positions"  # F's per-sample rest positions (facedyn.dynamics.removal.SAMPLE_POSITIONS)
 _STRETCH_SAMPLES = "stretch/samples"  # H's stretch neighbourhoods' samples (facedyn.dynamics.synthesis)
 MAX_MEMBERS = 8
+PER_TAKE = "per-take"  # info["face"] of a person-independent removal model, its face set up per take (facedyn.dynamics.portable)
 _DTYPES = {"float32": np.float32, "float64": np.float64, "int32": np.int32, "int64": np.int64}
 _RESERVED = ("format", "version", "kind", "fps", "windows", "architecture", "topology_fingerprint", "point_count", "skull_landmarks", "skin_samples", "normalization", "skull_motion")
 
@@ -108,6 +109,7 @@ class DynamicsModel:
     arrays: dict[str, np.ndarray] = field(default_factory=dict)  # kind-specific data (e.g. H's uv neighbourhoods)
     skull_motion: SkullMotionInput | None = None  # what the network reads of the skull; None = the paper's B(t) over windows["skull"]
     warnings: list[str] = field(default_factory=list)  # what loading could not verify (e.g. a file without checksums)
+    frame: object = None  # a person-independent model set up for one take: its FaceFrame (facedyn.dynamics.portable)
     _propagator: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -129,8 +131,9 @@ class DynamicsModel:
         return self.face.fingerprint
 
     def check_compatible(self, topology: Topology | str | None = None, fps: float | None = None) -> None:
-        """Raise ModelMismatch unless the topology (or its fingerprint) and fps match."""
-        if topology is not None:
+        """Raise ModelMismatch unless the topology (or its fingerprint) and fps match; a
+        person-independent model (its face built per take, facedyn.dynamics.portable) fits any topology."""
+        if topology is not None and self.info.get("face") != PER_TAKE:
             theirs = topology if isinstance(topology, str) else topology.fingerprint()
             if theirs != self.fingerprint:
                 raise ModelMismatch(f"the {self.kind} model was trained on mesh topology {self.fingerprint}, but this mesh has topology {theirs}")
@@ -693,6 +696,8 @@ def _describe(path: Path, stored: _Stored) -> dict:
         "format_version": stored.metadata["version"],
         "kind": model.kind,
         "network": NETWORK_NAMES[model.kind],
+        **({"face": "built per take (person-independent: any mesh, no rig or actor needed; the stored face is one it was trained on)"}
+           if model.info.get("face") == PER_TAKE else {}),
         "topology_fingerprint": model.fingerprint,
         "point_count": model.face.point_count,
         "fps": model.fps,

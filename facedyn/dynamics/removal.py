@@ -13,6 +13,8 @@ propagation. No step loops over frames in Python.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import torch
 
@@ -64,7 +66,11 @@ def remove_dynamics(
     identity); fps: the take's rate, which must be the model's; backend: the features'
     ``'auto' | 'opencl' | 'numpy'``; device: torch device for the network. The offsets are
     skull-frame vectors, zero on the rigid region; quasistatic = skull points - offsets.
+    A person-independent model set up for the take (facedyn.dynamics.portable.for_take)
+    reads the take in its face frame; its offsets come back in the take's skull frame.
     """
+    if model.frame is not None:
+        return _remove_in_face_frame(points, translate, orient, fps, model, backend, space, chunk_frames, device)
     if model.kind != "removal":
         raise ValueError(f"remove_dynamics needs a removal model, got a {model.kind!r} model")
     pts = check_points(points)
@@ -103,6 +109,19 @@ def remove_dynamics(
             propagator.apply_into(d.cpu().numpy(), offsets[a:b])
     quasistatic = skull_points - offsets
     return quasistatic, offsets
+
+
+def _remove_in_face_frame(points, translate, orient, fps, model, backend, space, chunk_frames, device):
+    """remove_dynamics of a model set up for a take, in its face frame (facedyn.dynamics.portable)."""
+    pts = check_points(points)
+    t, q = check_transforms(translate, orient, len(pts))
+    skull_points = skull_space(pts, t, q, space)
+    t_face, q_face = model.frame.transforms(t, q)
+    face_model = replace(model, frame=None, _propagator=model.propagator())
+    _, offsets = remove_dynamics(model.frame.points(skull_points), t_face, q_face, fps, face_model, backend, space="skull",
+                                 chunk_frames=chunk_frames, device=device)
+    offsets = model.frame.vectors_back(offsets)
+    return (skull_points - offsets).astype(np.float32), offsets
 
 
 def _to_skull32(world: np.ndarray, t: np.ndarray, q: np.ndarray) -> np.ndarray:

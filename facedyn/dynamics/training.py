@@ -37,7 +37,7 @@ from facedyn.dynamics.removal import SAMPLE_POSITIONS, sample_positions
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.spikes import replace_spikes
-from facedyn.dynamics.store import KEPT, WINDOW_INDEX, Moments, StreamedExamples, TrainingStore
+from facedyn.dynamics.store import KEPT, WINDOW_INDEX, StreamedExamples, TrainingStore
 from facedyn.dynamics.targets import TARGET_WINDOW, dynamic_offsets
 from facedyn.performance import Performance
 
@@ -58,6 +58,7 @@ class TrainingSequence:
     orient: np.ndarray | None = None  # (F, 4) (w, x, y, z); None = identity
     space: str = "skull"
     dynamics: np.ndarray | None = None  # (F, N, 3) known secondary dynamics, skull frame (a simulated take's truth)
+    face: FaceSetup | None = None  # the take's own face setup (a person-independent corpus of many faces); None: the model's
 
     @classmethod
     def coerce(cls, value) -> "TrainingSequence":
@@ -146,7 +147,7 @@ class PairSet(Resident):
     def __init__(self, skull: np.ndarray, velocities: np.ndarray, window: np.ndarray, targets: np.ndarray,
                  positions: np.ndarray | None, device: torch.device):
         """skull (F, Ds); velocities (V, S, 3) skin velocities of the frames the windows read;
-        window (F, 2w + 1) each frame's window into them; targets (F, S, 3); positions (S, 3) or None."""
+        window (F, 2w + 1) each frame's window into them; targets (F, S, 3); positions (F, S, 3) or None."""
         self.samples = velocities.shape[1]
         self.skull = torch.from_numpy(skull).to(device)
         self.velocities = torch.from_numpy(velocities).to(device)
@@ -160,7 +161,7 @@ class PairSet(Resident):
     def skin(self, f: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
         """(B, Di) skin inputs of pairs (f, s): the window of velocities, then the rest position."""
         x = self.velocities[self.window[f], s[:, None]].reshape(len(f), -1)
-        return x if self.positions is None else torch.cat([x, self.positions[s]], dim=1)
+        return x if self.positions is None else torch.cat([x, self.positions[f, s]], dim=1)
 
     def gather(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         f = idx // self.samples
@@ -281,11 +282,15 @@ def offset_errors(network: Network, examples, batch_size: int, unit: str) -> dic
 
 
 def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig) -> Iterator[dict[str, np.ndarray]]:
-    """A take's rows, PREPARE_FRAMES at a time: every frame, those away from its ends kept.
+    """A take's rows, PREPARE_FRAMES at a time: every frame, those away from its ends kept
+    (on the take's own face setup if it has one).
 
     Columns: "skull" (B(t) or the skull motion input), "skin" (the samples' skull-space
-    velocities xdot_i(t), a windowed column the store turns into X_i(t)) and "targets".
+    velocities xdot_i(t), a windowed column the store turns into X_i(t)), "targets", and
+    with ``config.sample_positions`` "positions" (the samples' rest positions p_i, per row
+    because a corpus of many faces has them per take).
     """
+    face = take.face or face
     pts = check_points(take.points, f"take {take.name!r} points")
     if pts.shape[1] != face.point_count:
         raise ValueError(f"take {take.name!r} has {pts.shape[1]} points, the face setup {face.point_count}")
@@ -315,7 +320,10 @@ def _prepare(take: TrainingSequence, face: FaceSetup, config: TrainConfig) -> It
         chunk_targets = np.asarray(targets[a:b])
         if config.target == "truth":
             chunk_targets = chunk_targets[:, face.samples]
-        yield {"skull": skull[a:b], "skin": velocities[a:b], "targets": chunk_targets, KEPT: kept[a:b]}
+        rows = {"skull": skull[a:b], "skin": velocities[a:b], "targets": chunk_targets, KEPT: kept[a:b]}
+        if config.sample_positions:
+            rows["positions"] = np.broadcast_to(sample_positions(face), (b - a, len(face.samples), 3))
+        yield rows
 
 
 def store_takes(takes: Iterable, prepare: Callable[[TrainingSequence], Iterator[dict[str, np.ndarray]]],
@@ -382,16 +390,14 @@ def _split(names: list[str], validation: Sequence[str] | None) -> set[str]:
     return held
 
 
-def streamed_normalization(store: TrainingStore, names, inputs: Sequence[str], targets: str,
-                           positions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def streamed_normalization(store: TrainingStore, names, inputs: Sequence[str], targets: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(input mean, input std, target mean, target scale) over the named takes' rows.
 
     Input statistics are per feature, each input column's over its own rows (F's skull
-    features per frame, its skin features per (frame, sample) pair), then F's sample
-    positions if it reads them (every frame has every sample: their moments over samples);
-    targets get a mean per coordinate and one common scale, the RMS of their deviation from it.
+    features per frame, its skin features and positions per (frame, sample) pair); targets
+    get a mean per coordinate and one common scale, the RMS of their deviation from it.
     """
-    stats = [store.moments(column, names) for column in inputs] + ([Moments.of(positions)] if positions is not None else [])
+    stats = [store.moments(column, names) for column in inputs]
     out = store.moments(targets, names)
     mean = np.concatenate([m.mean for m in stats])
     std = np.sqrt(np.concatenate([m.variance for m in stats]))
@@ -416,16 +422,15 @@ def train_removal(
     """
     config = config or TrainConfig()
     device = resolve_device(config.device)
-    positions = sample_positions(face) if config.sample_positions else None
     store, described, fps = store_takes(takes, lambda take: _prepare(take, face, config), scratch, {"skin": config.window})
     with store:
         samples = store.columns["skin"][0]
         train, val = split_store(store, described, config, samples,
-                                 lambda a: PairSet(a["skull"], a["skin"], a[WINDOW_INDEX % "skin"], a["targets"], positions, device))
+                                 lambda a: PairSet(a["skull"], a["skin"], a[WINDOW_INDEX % "skin"], a["targets"], a.get("positions"), device))
         names = [d["name"] for d in described if not d["validation"]]
-        skin_features = store.feature_width("skin") + (0 if positions is None else 3)
-        spec: NetworkSpec = removal_spec(store.columns["skull"][0], skin_features)
-        normalization = streamed_normalization(store, names, ("skull", "skin"), "targets", positions)
+        inputs = ("skull", "skin") + (("positions",) if config.sample_positions else ())
+        spec: NetworkSpec = removal_spec(store.columns["skull"][0], sum(store.feature_width(c) for c in inputs[1:]))
+        normalization = streamed_normalization(store, names, inputs, "targets")
         network, curve = fit_new_network(spec, normalization, train, val, config, device, progress)
         errors = offset_errors(network, val, config.batch_size, "pairs") if val is not None else None
     network.cpu()

@@ -176,7 +176,10 @@ def _removals(read: list, model) -> list:
     names = [take_name(path) for path, _ in read]
     if is_linear_response(model) and names[0] in calibration_names(model):  # its own session (check_response_takes)
         return remove_left_out(model, [TrainingSequence.from_performance(perf, name) for (_, perf), name in zip(read, names)])
-    return [removal_of(perf.points, *perf.skull(), perf.fps, model) for _, perf in read]
+    from facedyn.dynamics.portable import for_take, is_portable
+
+    # a person-independent model is set up for each take (its own rest shape and skull frame)
+    return [removal_of(perf.points, *perf.skull(), perf.fps, for_take(model, perf) if is_portable(model) else model) for _, perf in read]
 
 
 def check_length(path: Path, below: str, frames) -> None:

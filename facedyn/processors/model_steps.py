@@ -50,14 +50,17 @@ def removal_models(path: Path, flag: str, perf, fps: float, take: Path) -> list:
     """The models a removal file holds (one, or a blend's members) that fit the take: removal
     models (F) and linear responses, never a synthesis network."""
     from facedyn.dynamics.modelfile import load_models
+    from facedyn.dynamics.portable import for_take, is_portable
+    from facedyn.models import resolve_model
 
+    path = resolve_model(path, flag)
     models = load_models(path, topology=perf.topology, fps=fps)
     for model in models:
         if model.kind not in REMOVES:
             raise UsageError(f"--{flag} {path}: a synthesis model (network H), which reads the quasistatic shape it would "
                              "make; this needs a removal model (F), an actor's linear response (.response) or a blend of them")
         check_skull_frame(take, perf, path, model)
-    return models
+    return [for_take(model, perf) if is_portable(model) else model for model in models]
 
 
 def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:
@@ -118,8 +121,10 @@ def context_frames(model) -> int:
 
 
 def model_inputs(source, *model_paths: Path) -> list[str]:
-    """The provenance inputs of a layer computed from a take and model files."""
-    return list(source.inputs) + [str(Path(path).resolve()) for path in model_paths]
+    """The provenance inputs of a layer computed from a take and model files (a shipped model's name as its file)."""
+    from facedyn.models import resolve_model
+
+    return list(source.inputs) + [str(resolve_model(path).resolve()) for path in model_paths]
 
 
 def synthesized_chunk(reader, window, points, offsets, translate, orient, stats):

@@ -35,7 +35,8 @@ class RemoveProcessor(Processor):
     writes = Writes("layer", role=QUASISTATIC, help="the quasistatic layer to write (.usdc)")
     parameters = (
         Parameter("model", Path, help="the removal model file (from train-removal), an actor's linear response "
-                  "(.response, train-synthesis --response linear) or a blend of them (calibrate's removal.blend)", metavar="MODEL"),
+                  "(.response, train-synthesis --response linear), a blend of them (calibrate's removal.blend), or `default`: "
+                  "the shipped person-independent removal model, for an actor with neither rig nor session", metavar="MODEL"),
         Parameter("blend", Path, None, "a second removal model or linear response: remove the mean of the two models' dynamics",
                   metavar="MODEL"),
         Parameter("backend", str, "auto", "feature and Laplacian kernels", BACKENDS),
@@ -49,7 +50,8 @@ class RemoveProcessor(Processor):
         if params["blend"] is not None:
             models += removal_models(params["blend"], "blend", reader.head, reader.fps, request.inputs[0])
         description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "model": str(params["model"]),
-                       "blend": str(params["blend"] or ""), "samples": int(len(models[0].face.samples))}
+                       "blend": str(params["blend"] or ""), "samples": int(len(models[0].face.samples)),
+                       **{f"face_{key}": models[0].info[key] for key in ("rest", "facing") if key in models[0].info}}  # a per-take setup's
         return Plan(description, (reader, models, params))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
