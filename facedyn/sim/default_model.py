@@ -117,8 +117,7 @@ def build(args, command: str) -> Path:
               file=sys.stderr, flush=True)
 
     with tempfile.TemporaryDirectory(prefix="facedyn-default-") as scratch:
-        model = train_removal(corpus_takes(faces, args, record), _first_face(faces), config, report, backend="numpy",
-                              scratch=scratch)
+        model = train_removal(corpus_takes(faces, args, record), _first_face(faces), config, report, scratch=scratch)
     model.info["face"] = PER_TAKE
     model.info["training"]["build"] = {
         "command": command, "faces": [d for _, d in faces], "takes": record["takes"], "frames": record["frames"],
