@@ -31,7 +31,7 @@ import numpy as np
 from facedyn.dynamics.portable import PER_TAKE, face_setup
 from facedyn.sim import corpus
 from facedyn.sim.default_face import default_face
-from facedyn.sim.rig import FaceRig, ShapeOffsets
+from facedyn.rig import FaceRig, ShapeOffsets
 from facedyn.sim.volumetric import VolumetricParams
 
 FPS = 60.0
