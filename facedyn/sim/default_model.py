@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.dynamics.portable import PER_TAKE, face_setup
+from facedyn.rig import FaceRig, ShapeOffsets
 from facedyn.sim import corpus
 from facedyn.sim.default_face import default_face
-from facedyn.rig import FaceRig, ShapeOffsets
 from facedyn.sim.volumetric import VolumetricParams
 
 FPS = 60.0
