@@ -16,7 +16,8 @@ stabilized with the console commands, on an ARKit-named rig of about 2.7k points
 - Captures: simulated at 120 fps, every other frame kept (60 fps), tracker noise
   (bench_cross_sim.TRACKER), written as plain caches (metres, Z up, frames from 1001;
   plain_capture.write_plain_cache), then `usdfacedyn actor RIG -o actor.usda`, and per take
-  `import` and `stabilize --actor actor.usda` as a user runs them.
+  `import --fps 120` and `stabilize --actor actor.usda` as a user runs them: the corpus and
+  F run at 120 fps, and a model refuses a take at another rate.
 
 The folder gets `rig.usdc`, `actor.usda`, `session.json` (the recipe) and `takes/<take>/`
 (tracked.usdc and the take root take.usda); a take already there is kept, so an interrupted
@@ -47,6 +48,7 @@ PLATFORMS = ("platform:5", "platform:6.5", "platform:10", "platform:11", "platfo
 MOCAP = {"walk": "131_01.bvh", "hop": "131_03.bvh"}
 SECONDS = 4.5
 SIM_FPS, CAPTURE_FPS = 120.0, 60.0
+IMPORT_FPS = 120.0  # the corpus's rate (TakeSpec's), which calibrate's F is trained at
 TISSUE_SEED = 370_001
 
 
@@ -69,17 +71,37 @@ def platform_label(kind: str) -> str:
 
 def write_take(folder: Path, sim, rig, actor: Path) -> None:
     """One simulated take as a tracker's plain capture at CAPTURE_FPS, imported and stabilized
-    with the actor through the console, made in `folder`.partial and renamed when whole."""
+    with the actor through the console (`imported`)."""
+    step = int(round(SIM_FPS / CAPTURE_FPS))
+    tracked = add_tracker_noise(sim.world_points()[::step], CAPTURE_FPS, TRACKER, rig.neutral, seed=sim.spec.seed)
+    topology = rig.topology
+    imported(folder, actor, lambda path: write_plain_cache(path, tracked.points, topology.face_vertex_counts,
+                                                           topology.face_vertex_indices, CAPTURE_FPS))
+
+
+def imported(folder: Path, actor: Path, capture) -> None:
+    """A take folder: `capture(path)` writes its tracked.usdc, then import --fps IMPORT_FPS and
+    stabilize --actor; made in `folder`.partial and put in place of `folder` when whole."""
     partial = folder.with_name(folder.name + ".partial")
     if partial.exists():
         shutil.rmtree(partial)
     partial.mkdir(parents=True)
-    step = int(round(SIM_FPS / CAPTURE_FPS))
-    tracked = add_tracker_noise(sim.world_points()[::step], CAPTURE_FPS, TRACKER, rig.neutral, seed=sim.spec.seed)
-    topology = rig.topology
-    write_plain_cache(partial / "tracked.usdc", tracked.points, topology.face_vertex_counts, topology.face_vertex_indices, CAPTURE_FPS)
-    stabilize_with_cli(partial / "tracked.usdc", partial, actor)
+    capture(partial / "tracked.usdc")
+    stabilize_with_cli(partial / "tracked.usdc", partial, actor, IMPORT_FPS)
+    if folder.exists():
+        shutil.rmtree(folder)
     partial.rename(folder)
+
+
+def reimport(out: Path) -> int:
+    """Import and stabilize every take of the session in `out` again from its kept tracked.usdc
+    (a session made before the import's rate changed); how many."""
+    roots = take_roots(out)
+    for root in roots:
+        tracked = root.parent / "tracked.usdc"
+        imported(root.parent, out / "actor.usda", lambda path: shutil.copyfile(tracked, path))
+        print(f"{root.parent.name}: imported again", flush=True)
+    return len(roots)
 
 
 def make_session(out: Path, data: Path, expressions: int, jobs: int) -> dict:
@@ -96,7 +118,7 @@ def make_session(out: Path, data: Path, expressions: int, jobs: int) -> dict:
     todo = [spec for spec in specs if not (out / "takes" / spec.name / "take.usda").is_file()]
     recipe = {"rig": {"points": rig.point_count, "shapes": rig.expression_count, "names": "ARKit"}, "takes": [s.name for s in specs],
               "motions": list(PLATFORMS) + [f"bvh:{bvh}" for bvh in MOCAP.values()], "seconds": SECONDS, "simulated_fps": SIM_FPS,
-              "capture_fps": CAPTURE_FPS, "physics": "tissue", "tissue_seed": TISSUE_SEED, "tracker": dataclasses.asdict(TRACKER)}
+              "capture_fps": CAPTURE_FPS, "import_fps": IMPORT_FPS, "physics": "tissue", "tissue_seed": TISSUE_SEED, "tracker": dataclasses.asdict(TRACKER)}
     write_recipe(out, recipe)  # first, so that a benchmark can read the takes made so far
     tissue = TissueParams.random(TISSUE_SEED)
     started = time.perf_counter()
@@ -132,7 +154,13 @@ def main() -> None:
                         help="held expressions: 7 takes each")
     parser.add_argument("--data", type=Path, default=DATA, help="the shared data (CMU BVH files)")
     parser.add_argument("--jobs", type=int, default=2, help="takes simulated at once")
+    parser.add_argument("--reimport", action="store_true", help="import and stabilize the folder's takes again from their captures")
     args = parser.parse_args()
+    if args.reimport:
+        recipe = json.loads((args.output / "session.json").read_text())
+        print(json.dumps({"session": str(args.output), "imported_again": reimport(args.output)}))
+        write_recipe(args.output, {**recipe, "import_fps": IMPORT_FPS})
+        return
     recipe = make_session(args.output, args.data, args.expressions, args.jobs)
     print(json.dumps({"session": str(args.output), "takes": len(recipe["takes"]), "made_takes": recipe["made_takes"],
                       "made_seconds": recipe["made_seconds"]}))

@@ -94,8 +94,13 @@ class CalibrateProcessor(Processor):
             raise UsageError(f"--rig {params['rig']}: no such file")
         rig = read_blendshape_rig(params["rig"])
         frame = skull_frame_id(rig.neutral, rig.topology)
+        specs = corpus_specs(rig, params)
+        corpus_fps = specs[0].fps  # every protocol take's: F trains at it, and a model refuses a take at another rate
         for root in roots:
             head = TakeFrames(root, "quasistatic").head
+            if abs(head.fps - corpus_fps) > 1e-6 * corpus_fps:
+                raise TakeError(f"{root}: the take runs at {head.fps:g} fps, the family corpus and its F at {corpus_fps:g}; import "
+                                f"the session's captures with --fps {corpus_fps:g} (usdfacedyn import CAPTURE --fps {corpus_fps:g})")
             if head.skull_orient is None:
                 raise TakeError(f"{root}: no solved skull; stabilize the session's takes first (stabilize --actor ACTOR)")
             if head.topology.fingerprint() != rig.topology.fingerprint():
@@ -107,7 +112,6 @@ class CalibrateProcessor(Processor):
         if len(set(names)) != len(names):
             raise UsageError(f"two session takes share a name ({', '.join(sorted({n for n in names if names.count(n) > 1}))}); "
                              "each take's folder names it")
-        specs = corpus_specs(rig, params)
         description = {"session_takes": len(roots), "rig": str(params["rig"]), "points": rig.point_count, "corpus_takes": len(specs),
                        "budget_minutes": params["budget_minutes"], "epochs": params["epochs"] or "from the budget"}
         return Plan(description, (request, roots, rig, specs))

@@ -88,6 +88,21 @@ def test_calibrate_refuses_takes_in_another_skull_frame_or_without_a_rig(actor_s
     assert not (tmp_path / "out").exists()
 
 
+def test_calibrate_refuses_a_session_at_another_rate_than_its_corpus_before_building_it(actor_session, tmp_path, capsys):
+    """F trains at the corpus's 120 fps and refuses a take at another rate: a 60 fps session is
+    refused up front, not after the corpus and F (import --fps 120 makes it right)."""
+    rig, roots = actor_session
+    slow = tmp_path / "slow"
+    assert cli("import", roots[0].parent / "capture.usdc", "-o", slow / "capture.usdc", "--fps", "60") == 0
+    assert cli("stabilize", slow / "take.usda", "-o", slow / "stabilized.usdc", "--attach", slow / "take.usda",
+               "--actor", roots[0].parent.parent.parent / "actor.usda") == 0
+    capsys.readouterr()
+    assert cli("calibrate", slow / "take.usda", *roots[1:], "--rig", rig, "-o", tmp_path / "out") != 0
+    errors = capsys.readouterr().err
+    assert "runs at 60 fps" in errors and "--fps 120" in errors and "Traceback" not in errors
+    assert not (tmp_path / "out").exists()
+
+
 def test_calibrate_refuses_a_data_folder_that_lacks_what_the_corpus_reads(actor_session, tmp_path, capsys):
     rig, roots = actor_session
     assert cli("calibrate", *roots, "--rig", rig, "--data", tmp_path / "no-such-data", "-o", tmp_path / "out") == 2
