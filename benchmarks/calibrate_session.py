@@ -11,8 +11,8 @@ stabilized with the console commands, on an ARKit-named rig of about 2.7k points
 - Physics: facedyn's spring tissue (facedyn.sim.tissue) with one actor's tissue,
   TissueParams.random(TISSUE_SEED): a draw no corpus take makes (the corpus draws from the
   takes' seeds, below 4,000). The volumetric tissue would be another family, but on this
-  rig it costs about 110 s of CPU a take against the spring tissue's 7 s (measured with
-  simulate_take on one 4.5 s take), too slow for a benchmark's session.
+  rig it cost 110 s of CPU for one 4.5 s take (simulate_take, 131_03 hop) where the spring
+  tissue took 2.1 s for a 1.5 s take: too slow for a benchmark's session.
 - Captures: simulated at 120 fps, every other frame kept (60 fps), tracker noise
   (bench_cross_sim.TRACKER), written as plain caches (metres, Z up, frames from 1001;
   plain_capture.write_plain_cache), then `usdfacedyn actor RIG -o actor.usda`, and per take
