@@ -50,11 +50,12 @@ def usdfacedyn(*args: str) -> None:
         raise SystemExit(f"{' '.join(command)} failed: {done.stderr.strip() or done.stdout.strip()}")
 
 
-def stabilize_with_cli(cache: Path, folder: Path, actor: Path | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """import + stabilize with the defaults (into `actor`'s skull frame when given); the solved skull (translate, orient) per frame."""
+def stabilize_with_cli(cache: Path, folder: Path, actor: Path | None = None, fps: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """import (resampled to `fps` when given) + stabilize with the defaults (into `actor`'s skull frame when given); the
+    solved skull (translate, orient) per frame."""
     from facedyn.usd.take import read_take
 
-    usdfacedyn("import", str(cache), "-o", str(folder / "capture.usdc"))
+    usdfacedyn("import", str(cache), "-o", str(folder / "capture.usdc"), *(("--fps", f"{fps:g}") if fps else ()))
     usdfacedyn("stabilize", str(folder / "take.usda"), "-o", str(folder / "stabilized.usdc"), "--attach", str(folder / "take.usda"),
                *(("--actor", str(actor)) if actor is not None else ()))
     performance, _ = read_take(folder / "take.usda")

@@ -46,6 +46,9 @@ SECTIONS = (
     ("bench_model_load_memory", "Model load memory",
      "The peak of loading a model file beside the arrays it declares; the libraries' one-time first use kept apart."),
     ("bench_batch", "Farms", "usdfacedyn batch on a local Dask cluster."),
+    ("bench_calibrate", "Calibration time",
+     "usdfacedyn calibrate on a 70-take session of a 2.7k-point ARKit-named rig, the corpus included (target: 45 minutes "
+     "on 2 cores): wall time, each stage's, peak memory, F's measured speed and the epochs the budget gave."),
     ("bench_motion_spectrum", "Skull motion spectra", "Where the skull's acceleration power lies, 6-15 Hz, procedural gaits beside real mocap."),
     ("tests", "The test suite", "The time of the README's test command."),
 )

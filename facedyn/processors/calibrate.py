@@ -7,7 +7,10 @@ The README's workflow for a real actor, as one resumable run within a stated bud
    tracking noise, the Live Link performances with `--data`; facedyn.processors.corpus_writer.build_corpus);
 2. `family.removal`: the family's F trained on it with the recommended flags (true skull and
    targets, skull accelerations, sample positions, batches of 2,000), for as many epochs of
-   `--subsample` of the pairs as the budget leaves (`--epochs` gives them instead);
+   `--subsample` of the pairs as fit the budget's share for it at the speed F trains on this
+   machine, measured first by a short probe on a few of the corpus's takes
+   (facedyn.processors.budget): so the default's epochs depend on the machine's speed and
+   load, and `--epochs` pins them (no probe, the same model on the same machine);
 3. `synthesis.response`: the actor's linear response fitted on the session, its ridge
    chosen there (facedyn.dynamics.response), with F's samples and landmarks;
 4. the removal chosen without truth: each candidate (the family's F, the response, the mean
@@ -16,8 +19,9 @@ The README's workflow for a real actor, as one resumable run within a stated bud
    refitted without it, so its figure is a new capture's); the least-leaving is written as
    `removal.removal`, `removal.response` or `removal.blend` (a blend file holding both
    models), which `remove --model` takes;
-5. `calibration.json`: every candidate's figure, the choice, the budget and the time each
-   stage took.
+5. `calibration.json`: every candidate's figure, the choice, the budget (the probe's
+   throughput, the epochs planned and the epochs trained with their measured seconds and
+   pairs a second) and the time each stage took.
 
 Each stage's outputs are written atomically into the folder and recorded in
 `stages.json`; a re-run skips the stages already done with the same inputs, so an
@@ -30,18 +34,17 @@ from __future__ import annotations
 import json
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from facedyn.errors import UsageError
 from facedyn.io.files import write_atomically
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
+from facedyn.processors.budget import PROBE_EPOCHS, PROBE_TAKES, EpochClock, planned_epochs, probe_rates, probe_takes
 from facedyn.progress import Progress
 
 BUDGET_MINUTES = 45.0  # the whole command's, by default: the issue's target for a 70-take session of a 2.7k-point rig on 2 cores
-F_SHARE = 0.6  # of the minutes the corpus leaves, F's training takes this share; the response and the three scores the rest
-# F's training throughput in (frame, sample) pairs a second on 2 cores with the recommended flags: issue 37's evaluation
-# put 250 epochs of its 141-take corpus (about 17.5 M pairs an epoch) at about 6 hours on a 2,694-point rig
-PAIRS_PER_SECOND = 200_000.0
+F_SHARE = 0.6  # of the minutes the corpus and the probe leave, F's training takes this share; the response and the scores the rest
 MAX_EPOCHS = 250  # the paper's
 CANDIDATES = ("family", "response", "mean")  # the removals scored, in the order a tie keeps
 NOISE_CM = 0.01  # the recommended corpus's tracking noise
@@ -57,10 +60,11 @@ class CalibrateProcessor(Processor):
                     "(a re-run resumes in it)", resumable=True)
     parameters = (
         Parameter("rig", Path, help="the actor's UsdSkel blend-shape rig, which the family corpus is simulated on", metavar="RIG"),
-        Parameter("budget_minutes", float, BUDGET_MINUTES, "the whole calibration's time: F trains for what the corpus leaves of it",
+        Parameter("budget_minutes", float, BUDGET_MINUTES, "the whole calibration's time: F trains for its share of what the corpus leaves, at the speed a short "
+                  "probe measures",
                   above=0.0, maximum=100000.0, metavar="MINUTES"),
-        Parameter("epochs", int, None, "F's training epochs (default: as many as the budget leaves, at most 250)", minimum=1,
-                  maximum=100000),
+        Parameter("epochs", int, None, "F's training epochs (default: as many as fit the budget at F's speed measured on this "
+                  "machine, so they depend on it; at most 250)", minimum=1, maximum=100000),
         Parameter("subsample", float, 0.5, "fraction of the corpus's (frame, sample) pairs F draws each epoch", above=0.0, maximum=1.0),
         Parameter("data", Path, None, "a ../shared/data-like folder: the corpus adds the Live Link performances (recommended)",
                   metavar="DIR"),
@@ -91,8 +95,14 @@ class CalibrateProcessor(Processor):
             raise UsageError(f"--rig {params['rig']}: no such file")
         rig = read_blendshape_rig(params["rig"])
         frame = skull_frame_id(rig.neutral, rig.topology)
-        for root in roots:
-            head = TakeFrames(root, QUASISTATIC).head
+        heads = {root: TakeFrames(root, QUASISTATIC).head for root in roots}
+        rates = sorted({round(head.fps, 6) for head in heads.values()})
+        if len(rates) > 1:
+            raise UsageError(f"the session's takes run at {', '.join(f'{r:g}' for r in rates)} fps; a model serves one rate: "
+                             f"import them at one rate (usdfacedyn import CAPTURE --fps RATE)")
+        # the corpus is simulated at the session's rate, so F and the response read the session's frames as they trained
+        specs = [replace(spec, fps=rates[0]) for spec in corpus_specs(rig, params)]
+        for root, head in heads.items():
             if head.skull_orient is None:
                 raise TakeError(f"{root}: no solved skull; stabilize the session's takes first (stabilize --actor ACTOR)")
             if head.topology.fingerprint() != rig.topology.fingerprint():
@@ -104,8 +114,7 @@ class CalibrateProcessor(Processor):
         if len(set(names)) != len(names):
             raise UsageError(f"two session takes share a name ({', '.join(sorted({n for n in names if names.count(n) > 1}))}); "
                              "each take's folder names it")
-        specs = corpus_specs(rig, params)
-        description = {"session_takes": len(roots), "rig": str(params["rig"]), "points": rig.point_count, "corpus_takes": len(specs),
+        description = {"session_takes": len(roots), "rig": str(params["rig"]), "points": rig.point_count, "corpus_takes": len(specs), "corpus_fps": specs[0].fps,
                        "budget_minutes": params["budget_minutes"], "epochs": params["epochs"] or "from the budget"}
         return Plan(description, (request, roots, rig, specs))
 
@@ -120,16 +129,22 @@ class CalibrateProcessor(Processor):
         stages = Stages(out, progress)
         started = time.perf_counter()
         session = file_state(roots)
-        corpus_key = key_of("corpus", sha256_of_file(params["rig"]), [s.name for s in specs], corpus_description(params))
+        corpus_key = key_of("corpus", sha256_of_file(params["rig"]), [s.name for s in specs], specs[0].fps, corpus_description(params))
         corpus = stages.run("corpus", corpus_key, [out / "corpus"], lambda: build_family_corpus(out / "corpus", rig, specs, params, progress),
                             resumes=True)
-        budget = training_budget(params, corpus, stages.seconds().get("corpus", time.perf_counter() - started))
+        probe = None
+        if params["epochs"] is None:
+            probe_key = key_of("probe", corpus_key, params["subsample"], params["seed"], PROBE_TAKES, PROBE_EPOCHS)
+            probe = stages.run("probe", probe_key, [], lambda: probe_training(out / "corpus", params, progress))
+        seconds = stages.seconds()
+        spent = seconds.get("corpus", time.perf_counter() - started) + (seconds.get("probe", 0.0) if probe is not None else 0.0)
+        budget = training_budget(params, corpus, spent, probe)
         progress.start(f"budget {params['budget_minutes']:g} min: F trains {budget['epochs']} epochs of {budget['subsample']:.0%} of "
                        f"{budget['pairs']:,} pairs ({budget['training_seconds_planned'] / 60:.1f} min planned)", 1)
         progress.finish()
-        family_key = key_of("family", corpus_key, budget, params["seed"])
-        stages.run("family", family_key, [out / "family.removal"], lambda: train_family(out / "corpus", out / "family.removal", budget,
-                                                                                          params, progress))
+        family_key = key_of("family", corpus_key, budget["epochs"], budget["subsample"], params["seed"])
+        family = stages.run("family", family_key, [out / "family.removal"],
+                            lambda: train_family(out / "corpus", out / "family.removal", budget, corpus, params, progress))
         response_key = key_of("response", family_key, session, params["ridge"], params["settle"])
         response = stages.run("response", response_key, [out / "synthesis.response"],
                               lambda: fit_response(roots, out / "family.removal", out / "synthesis.response", params, progress))
@@ -146,14 +161,15 @@ class CalibrateProcessor(Processor):
         record = {"chosen": chosen, "removal": removal.name, "synthesis": "synthesis.response",
                   "candidates": {name: {"models": [str(p.name) for p in models[name] if p is not None], **figures[name]}
                                  for name in CANDIDATES},
-                  "response": response, "budget": {**budget, "budget_minutes": params["budget_minutes"]},
+                  "response": response, "budget": {**budget, "budget_minutes": params["budget_minutes"]}, "family": family,
                   "stage_seconds": stages.seconds(), "rig": str(params["rig"]), "session": [str(r) for r in roots],
                   "corpus": corpus}
         text = json.dumps(record, indent=2, sort_keys=True).encode() + b"\n"
         write_atomically(out / "calibration.json", lambda handle: handle.write(text))
         return FolderOutput({"chosen": chosen, "removal": str(removal), "synthesis": str(out / "synthesis.response"),
                              **{f"{name}_session_motion_left": figures[name]["session_motion_left"] for name in CANDIDATES},
-                             "epochs": budget["epochs"], "subsample": budget["subsample"], "calibration": str(out / "calibration.json")})
+                             "epochs": budget["epochs"], "subsample": budget["subsample"], "pairs_per_second": family["pairs_per_second"],
+                             "calibration": str(out / "calibration.json")})
 
     def describe(self, report: dict) -> str:
         summary = report["summary"]
@@ -181,29 +197,61 @@ def build_family_corpus(folder: Path, rig, specs: list, params: dict, progress: 
     from facedyn.processors.corpus_writer import build_corpus
 
     index = build_corpus(folder, rig, specs, progress=progress, description=corpus_description(params), jobs=params["jobs"])
-    return {"takes": len(index["takes"]), "frames": int(index["frames"])}
+    return {"takes": len(index["takes"]), "failed": len(index["failed"]), "frames": int(index["frames"])}
 
 
-def training_budget(params: dict, corpus: dict, corpus_seconds: float) -> dict:
+def training_budget(params: dict, corpus: dict, spent_seconds: float, probe: dict | None) -> dict:
     """F's epochs and subsample: --epochs, else as many epochs of --subsample of the corpus's
-    pairs as F_SHARE of the minutes the corpus left would train at PAIRS_PER_SECOND."""
+    pairs as fit F_SHARE of the minutes the corpus and the probe left, at the probe's speed."""
     pairs = corpus["frames"] * F_SAMPLES
-    left_s = max(params["budget_minutes"] * 60.0 - corpus_seconds, 0.0)
+    left_s = max(params["budget_minutes"] * 60.0 - spent_seconds, 0.0)
     train_s = F_SHARE * left_s
-    epochs = params["epochs"] or int(min(max(train_s * PAIRS_PER_SECOND / (pairs * params["subsample"]), 1), MAX_EPOCHS))
-    return {"epochs": epochs, "subsample": params["subsample"], "pairs": pairs, "training_seconds_planned": round(train_s, 1),
-            "epochs_given": params["epochs"] is not None}
+    plan = {"epochs": params["epochs"]} if probe is None else planned_epochs(train_s, probe, corpus["frames"], MAX_EPOCHS)
+    return {**plan, "subsample": params["subsample"], "pairs": pairs, "training_seconds_planned": round(train_s, 1),
+            "epochs_given": params["epochs"] is not None, "probe": probe}
 
 
-def train_family(corpus: Path, output: Path, budget: dict, params: dict, progress: Progress) -> dict:
-    """Stage 2: the family's F with train-removal's recommended flags, its epochs the budget's."""
+def train_f(inputs: list[Path], output: Path, epochs: int, params: dict, progress: Progress) -> EpochClock:
+    """F trained with train-removal's recommended flags; the clock of its epochs."""
     from facedyn.processors import registry
     from facedyn.processors.runner import execute
 
-    report = execute(registry.load("train-removal"), Request([corpus], output, params={
+    clock = EpochClock(progress)
+    execute(registry.load("train-removal"), Request(inputs, output, params={
         "skull": "truth", "target": "truth", "skull_features": "acceleration", "sample_positions": True, "batch_size": 2000,
-        "epochs": budget["epochs"], "subsample": budget["subsample"], "seed": params["seed"]}), progress)
-    return {"seconds": report["seconds"]["total"]}
+        "epochs": epochs, "subsample": params["subsample"], "seed": params["seed"]}), clock)
+    return clock
+
+
+def probe_training(corpus: Path, params: dict, progress: Progress) -> dict:
+    """F's speed on this machine: PROBE_EPOCHS epochs on PROBE_TAKES of the corpus's takes, timed
+    (facedyn.processors.budget); the model is thrown away."""
+    import tempfile
+
+    takes = json.loads((corpus / "corpus.json").read_text())["takes"]
+    entries = {take["name"]: take for take in takes}
+    names = probe_takes([take["name"] for take in takes])
+    started = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix=".probe.", dir=corpus.parent) as scratch:
+        clock = train_f([corpus / entries[name]["folder"] for name in names], Path(scratch) / "probe.removal", PROBE_EPOCHS, params,
+                        progress)
+    frames = sum(entries[name]["frames"] for name in names)
+    return {"takes": len(names), **probe_rates(time.perf_counter() - started, clock.epoch_seconds(), frames,
+                                                F_SAMPLES * params["subsample"])}
+
+
+def train_family(corpus: Path, output: Path, budget: dict, size: dict, params: dict, progress: Progress) -> dict:
+    """Stage 2: the family's F with train-removal's recommended flags, its epochs the budget's;
+    what its epochs took (the first includes building the feature store) and its throughput in
+    (frame, sample) pairs drawn a second, over the epochs after the first."""
+    import statistics
+
+    started = time.perf_counter()
+    epochs = train_f([corpus], output, budget["epochs"], params, progress).epoch_seconds()
+    steady = statistics.median(epochs[1:] or epochs)
+    return {"seconds": round(time.perf_counter() - started, 1), "epochs": len(epochs), "first_epoch_seconds": epochs[0],
+            "median_epoch_seconds": round(steady, 3),
+            "pairs_per_second": round(size["frames"] * F_SAMPLES * params["subsample"] / max(steady, 1e-6), 1)}
 
 
 def fit_response(roots: list, family: Path, output: Path, params: dict, progress: Progress) -> dict:

@@ -163,9 +163,9 @@ def test_batch_steps_are_the_processors_with_the_flags_they_declare(tmp_path, ca
     # batch's flag for remove's model is --removal-model; --model is its deprecated alias
     args = batch_args(str(files["shot0.usdc"]), "-o", str(tmp_path / "out"), "--model", str(files["f.removal"]))
     assert models_from(args).removal == files["f.removal"] and "--removal-model" in capsys.readouterr().err
-    assert models_from(batch_args("x", "-o", "y", "--removal-model", "f")).removal == Path("f")
+    assert models_from(batch_args("x", "-o", "y", "--removal-model", "f.removal")).removal == Path("f.removal")
     with pytest.raises(UsageError, match="old name of --removal-model"):
-        models_from(batch_args("x", "-o", "y", "--removal-model", "f", "--model", "g"))
+        models_from(batch_args("x", "-o", "y", "--removal-model", "f.removal", "--model", "g.removal"))
 
 
 def tree_checksums(folder: Path) -> dict[str, str]:

@@ -93,7 +93,7 @@ def test_gathered_pairs_equal_the_whole_take_features(corpus, monkeypatch, tmp_p
     store, _, _ = training.store_takes(takes[:2], lambda take: training._prepare(take, face, config), tmp_path, {"skin": config.window})
     with store:
         examples = StreamedExamples(store, store.rows_of(names), len(face.samples),
-                                    lambda a: PairSet(a["skull"], a["skin"], a[WINDOW_INDEX % "skin"], a["targets"], positions,
+                                    lambda a: PairSet(a["skull"], a["skin"], a[WINDOW_INDEX % "skin"], a["targets"], a["positions"],
                                                       torch.device("cpu")), resident)
         assert examples.resident == (resident > 1e6)
         got = np.concatenate([chunk.gather(torch.arange(len(chunk)))[0].numpy() for chunk in examples.chunks()])
@@ -121,7 +121,7 @@ def test_training_batches_draw_each_pair_once_and_split_equals_concatenated():
     velocities = rng.normal(size=(frames + 1, samples, 3)).astype(np.float32)
     window = np.clip(np.arange(frames)[:, None] + np.arange(-w, w + 1)[None, :], 0, frames)
     pairs = PairSet(rng.normal(size=(frames, 5)).astype(np.float32), velocities, window, rng.normal(size=(frames, samples, 3)).astype(np.float32),
-                    rng.normal(size=(samples, 3)).astype(np.float32), torch.device("cpu"))
+                    rng.normal(size=(frames, samples, 3)).astype(np.float32), torch.device("cpu"))
     seen = []
     network = training.Network(training.removal_spec(5, (2 * w + 1) * 3 + 3))
     for (skull, skin, rows), targets in pairs.batches(1.0, 100, torch.Generator().manual_seed(0), torch.device("cpu")):
@@ -182,10 +182,10 @@ def test_pairset_gathers_frame_and_sample_inputs():
     velocities = rng.normal(size=(7, 3, 3)).astype(np.float32)
     window = np.array([[6, 0, 1], [0, 1, 2], [1, 2, 3], [2, 3, 4], [3, 4, 6]])  # 6: beyond the take (zero)
     velocities[6] = 0
-    positions = rng.normal(size=(3, 3)).astype(np.float32)
+    positions = rng.normal(size=(5, 3, 3)).astype(np.float32)
     pairs = PairSet(skull, velocities, window, targets, positions, torch.device("cpu"))
     x, y = pairs.gather(torch.tensor([0, 4, 14]))
     f, s = np.array([0, 1, 4]), np.array([0, 1, 2])
     skin = velocities[window[f], s[:, None]].reshape(3, -1)
-    np.testing.assert_array_equal(x.numpy(), np.concatenate([skull[f], skin, positions[s]], axis=1))
+    np.testing.assert_array_equal(x.numpy(), np.concatenate([skull[f], skin, positions[f, s]], axis=1))
     np.testing.assert_array_equal(y.numpy(), targets[f, s])

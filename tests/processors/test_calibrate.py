@@ -55,6 +55,8 @@ def test_calibrate_chooses_the_least_leaving_removal_and_resumes(actor_session, 
     assert sorted(p.name for p in out.glob("removal.*")) == [removal.name]
     assert (out / "synthesis.response").is_file() and (out / "family.removal").is_file()
     assert record["budget"]["epochs"] == 2 and record["budget"]["epochs_given"] and record["budget"]["budget_minutes"] == 45.0
+    assert record["budget"]["probe"] is None and "probe" not in record["stage_seconds"]  # --epochs pins them: nothing to measure
+    assert record["family"]["epochs"] == 2 and record["family"]["pairs_per_second"] > 0
     assert set(record["stage_seconds"]) >= {"corpus", "family", "response", "score family", "score response", "score mean"}
     # the figures are evaluate --session's: the mean's, re-run by hand, is the recorded one
     assert cli("evaluate", *roots, "--session", "true", "--removal", out / "family.removal", "--blend", out / "synthesis.response",
@@ -84,6 +86,26 @@ def test_calibrate_refuses_takes_in_another_skull_frame_or_without_a_rig(actor_s
     errors = capsys.readouterr().err
     assert "--rig is required" in errors and "at least two" in errors and "Traceback" not in errors
     assert not (tmp_path / "out").exists()
+
+
+def test_calibrate_simulates_its_corpus_at_the_session_rate_and_refuses_a_mixed_session(actor_session, tmp_path, capsys):
+    """A model serves one rate: the corpus is planned at the session's rate (60 fps captures
+    need no resampling), and a session of takes at two rates is refused before anything is built."""
+    rig, roots = actor_session
+    slow = []
+    for k in range(2):
+        folder = tmp_path / f"slow{k}"
+        assert cli("import", roots[k].parent / "capture.usdc", "-o", folder / "capture.usdc", "--fps", "60") == 0
+        assert cli("stabilize", folder / "take.usda", "-o", folder / "stabilized.usdc", "--attach", folder / "take.usda",
+                   "--actor", roots[0].parent.parent.parent / "actor.usda") == 0
+        slow.append(folder / "take.usda")
+    capsys.readouterr()
+    assert cli("calibrate", *slow, "--rig", rig, "-o", tmp_path / "planned", "--dry-run", "--json") == 0
+    assert json.loads(capsys.readouterr().out)["plan"]["corpus_fps"] == 60
+    assert cli("calibrate", slow[0], *roots[1:], "--rig", rig, "-o", tmp_path / "out") == 2
+    errors = capsys.readouterr().err
+    assert "60, 120 fps" in errors and "--fps" in errors and "Traceback" not in errors
+    assert not (tmp_path / "out").exists() and not (tmp_path / "planned").exists()
 
 
 def test_calibrate_refuses_a_data_folder_that_lacks_what_the_corpus_reads(actor_session, tmp_path, capsys):

@@ -107,7 +107,8 @@ def test_help_marks_required_and_prints_each_default_once(capsys):
         main(["remove", "--help"])
     flat = " ".join(capsys.readouterr().out.split())
     assert ("--model MODEL the removal model file (from train-removal), an actor's linear response (.response, train-synthesis "
-            "--response linear) or a blend of them (calibrate's removal.blend) (required)") in flat
+            "--response linear), a blend of them (calibrate's removal.blend), or `default`: the shipped person") in flat
+    assert "for an actor with neither rig nor session (required)" in flat  # argparse may wrap inside person-independent
     with pytest.raises(SystemExit):
         main(["train-synthesis", "--help"])
     out = capsys.readouterr().out
