@@ -51,7 +51,13 @@ SECTIONS = (
      "on 2 cores): wall time, each stage's, peak memory, F's measured speed and the epochs the budget gave."),
     ("bench_motion_spectrum", "Skull motion spectra", "Where the skull's acceleration power lies, 6-15 Hz, procedural gaits beside real mocap."),
     ("tests", "The test suite", "The time of the README's test command."),
+    ("testset", "Test set",
+     "Actors made by a soft-tissue solver facedyn did not write (MuJoCo flex, benchmarks/README-testset.md), scored by "
+     "`benchmarks/testset_score.py` (`benchmarks/results/testset/`): the fraction of the true dynamics' RMS a removal leaves "
+     "on the face region, solved skull, plain captures with tracker noise. Validation actors are tuned on; a test actor is "
+     "run once per finished change and never used to choose."),
 )
+TESTSET_COLUMNS = ("take", "frames", "dynamics_rms_mm", "do_nothing", "moving_average", "removal")
 CONTEXT = ("command", "commit", "date", "machine", "load", "note", "source")
 NOT_FIGURES = {"id", "benchmark", "case", "obtained", "upper_bound", "table", "notes", *CONTEXT}
 
@@ -73,6 +79,33 @@ def load_records(folder: Path = RESULTS) -> list[dict]:
             if missing:
                 raise RecordError(f"{path}: record {index} lacks {', '.join(missing)}")
             records.append(record)
+    return records + testset_records(folder / "testset")
+
+
+def testset_records(folder: Path) -> list[dict]:
+    """testset_score.py's runs (one file each, their own format) as records with a table."""
+    records = []
+    for path in sorted(folder.glob("*.json")):
+        try:
+            run = json.loads(path.read_text())
+            flags = (f" --removal {run['removal']}" if run.get("removal") else "") + (f" --blend {run['blend']}" if run.get("blend") else "")
+            flags += " --no-actor" if run.get("stabilized") == "without --actor" else ""
+            records.append({
+                "benchmark": "testset", "id": f"testset-{path.stem}",
+                "case": f"{run['actor']} ({run['split']} actor), removal: {run.get('removal') or 'none'}, stabilized {run.get('stabilized', 'with --actor')}",
+                "command": f"python benchmarks/testset_score.py ACTOR_FOLDER{flags}", "commit": run["commit"], "date": run["date"],
+                "machine": f"{run['machine']}, {run['cpus']} cores", "load": "not recorded (scores do not depend on it)",
+                "obtained": {"skull": "solved (stabilize " + run.get("stabilized", "with --actor") + ")",
+                             "rest": "given (the actor made from the actor's rig)" if run.get("stabilized") != "without --actor"
+                             else "none (the take's own frame and first frame)",
+                             "test data": "MuJoCo flex tissue over the actor's own bone (benchmarks/testset)",
+                             "model": (f"{run['removal']} (how it was trained: usdfacedyn inspect {run['removal']})" if run.get("removal")
+                                       else "none: baselines only"),
+                             "split": run["split"] + (": tuned on" if run["split"] == "validation" else ": run once, never used to choose")},
+                "table": {"columns": list(TESTSET_COLUMNS), "rows": [[take.get(c, "") for c in TESTSET_COLUMNS] for take in run["takes"]]},
+            })
+        except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
+            raise RecordError(f"{path}: not a testset_score.py run ({error})") from None
     return records
 
 
