@@ -94,7 +94,9 @@ class Network(nn.Module):
             raise ValueError(f"inputs of sizes {ds} + {items.shape[-1]} do not add up to the network's {self.spec.inputs}")
         first = self.layers[0]
         per_row = nn.functional.linear((shared - self.input_mean[:ds]) / self.input_std[:ds], first.weight[:, :ds], first.bias)
-        h = nn.functional.linear((items - self.input_mean[ds:]) / self.input_std[ds:], first.weight[:, ds:]) + per_row[rows]
+        # index_select, not per_row[rows]: its backward adds the rows' gradients in a fixed order, so training is
+        # repeatable on several threads (advanced indexing's is not)
+        h = nn.functional.linear((items - self.input_mean[ds:]) / self.input_std[ds:], first.weight[:, ds:]) + per_row.index_select(0, rows)
         for layer in self.layers[1:]:
             h = layer(h)
         return h
