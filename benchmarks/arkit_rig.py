@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from facedyn.performance import Topology
-from facedyn.sim.rig import FaceRig
+from facedyn.rig import FaceRig
 
 ICT = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"
 TARGET = 2700

@@ -13,18 +13,10 @@ from pxr import Sdf
 from facedyn.cli import main
 from facedyn.errors import FacedynError, UsageError
 
+from cli_run import run
 from usd_fixtures import grid_mesh, write_mesh_cache
 
 posix_only = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="FIFOs are POSIX")
-
-
-def run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def one_line(code, err, expected_code, *fragments):

@@ -4,22 +4,13 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from cli_run import run
 from usd_fixtures import write_mesh_cache
 
-from facedyn.cli import main
 from facedyn.usd.take import read_layers
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "dynamics"))
 from test_portable import sheet_take  # noqa: E402  (the dynamics tests' sheet)
-
-
-def run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_remove_with_the_shipped_model_on_a_take_without_rig_actor_or_session(tmp_path, capsys):

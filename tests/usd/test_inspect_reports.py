@@ -4,17 +4,13 @@ import json
 import pytest
 from pxr import Sdf
 
-from facedyn.cli import main
 
+from cli_run import run
 from test_take_checks import _take
 
 
 def _run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
+    code, out, err = run(argv, capsys)
     assert "Traceback" not in err and "internal error" not in err, err
     return code, out, err
 
