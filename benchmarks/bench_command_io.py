@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bench_remove_speed import FPS, ICT_RIG, SAMPLES, take
+from bench_remove_speed import FPS, ICT_RIG, SAMPLES, take, write_still_take
 from bench_synthesize_speed import synthesis_model
 
 
@@ -75,21 +75,12 @@ def build_take(folder: Path, frames: int, rig_path: Path):
     from facedyn.dynamics.modelfile import DynamicsModel, save_model
     from facedyn.dynamics.network import Network, removal_spec
     from facedyn.dynamics.stretch import UVNeighbourhoods
-    from facedyn.sim.corpus import SimulatedPerformance, TakeSpec
-    from facedyn.usd.corpus import write_simulated_take
-    from facedyn.usd.layers import write_take_root
     from facedyn.usd.rig import read_blendshape_rig
-    from facedyn.usd.timing import Timing
 
     rig = read_blendshape_rig(rig_path)
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, sample_count=SAMPLES)
     skull_points, translate, orient = take(rig.neutral.astype(np.float64), frames)
-    zeros = np.zeros_like(skull_points)
-    performance = SimulatedPerformance(TakeSpec("speed", "still"), np.arange(1, frames + 1, dtype=np.float64), FPS, translate, orient,
-                                       skull_points, zeros, zeros, np.zeros((frames, rig.expression_count), np.float32))
-    write_simulated_take(folder, performance, rig)
-    root = write_take_root(folder / "take.usda", [folder / "truth" / "skull.usdc", folder / "capture.usdc"],
-                           Timing(FPS, FPS, 1.0, float(frames)))
+    root = write_still_take(folder, rig, skull_points, translate, orient, "take.usda")
     torch.manual_seed(0)
     removal = DynamicsModel("removal", Network(removal_spec()), face, FPS, {"skull": 10, "skin": 10, "target": 10})
     save_model(removal, folder / "actor.removal")

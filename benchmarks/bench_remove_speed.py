@@ -84,6 +84,22 @@ def mesh(rig_arg: str):
     return None, points, topology, FaceSetup.build(topology, points, rigid_vertices=rigid, sample_count=SAMPLES)
 
 
+def write_still_take(folder: Path, rig, skull_points, translate, orient, root_name: str) -> Path:
+    """A stabilized take of `skull_points` under the skull (translate, orient), no dynamics,
+    written as the simulator writes one, with its root `root_name` listing skull and capture."""
+    from facedyn.sim.corpus import SimulatedPerformance, TakeSpec
+    from facedyn.usd.corpus import write_simulated_take
+    from facedyn.usd.layers import write_take_root
+    from facedyn.usd.timing import Timing
+
+    frames = len(skull_points)
+    zeros = np.zeros_like(skull_points)
+    take = SimulatedPerformance(TakeSpec("speed", "still"), np.arange(1, frames + 1, dtype=np.float64), FPS, translate, orient,
+                                skull_points, zeros, zeros, np.zeros((frames, rig.expression_count), np.float32))
+    write_simulated_take(folder, take, rig)
+    return write_take_root(folder / root_name, [folder / "truth" / "skull.usdc", folder / "capture.usdc"], Timing(FPS, FPS, 1.0, float(frames)))
+
+
 def removal_with_io(rig, skull_points, translate, orient, model, repeats: int) -> dict:
     """Time the remove processor end to end on a stabilized take written to a scratch folder."""
     from facedyn.dynamics.modelfile import save_model
@@ -91,20 +107,11 @@ def removal_with_io(rig, skull_points, translate, orient, model, repeats: int) -
     from facedyn.processors.base import Request
     from facedyn.processors.runner import execute
     from facedyn.progress import Progress
-    from facedyn.sim.corpus import SimulatedPerformance, TakeSpec
-    from facedyn.usd.corpus import write_simulated_take
-    from facedyn.usd.layers import write_take_root
-    from facedyn.usd.timing import Timing
 
     frames = len(skull_points)
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch) / "take"
-        zeros = np.zeros_like(skull_points)
-        take = SimulatedPerformance(TakeSpec("speed", "still"), np.arange(1, frames + 1, dtype=np.float64), FPS, translate, orient,
-                             skull_points, zeros, zeros, np.zeros((frames, rig.expression_count), np.float32))
-        write_simulated_take(folder, take, rig)
-        root = write_take_root(folder / "stabilized.usda", [folder / "truth" / "skull.usdc", folder / "capture.usdc"],
-                               Timing(FPS, FPS, 1.0, float(frames)))
+        root = write_still_take(folder, rig, skull_points, translate, orient, "stabilized.usda")
         model_path = save_model(model, Path(scratch) / "actor.removal")
         output = folder / "quasistatic.usdc"
         processor = registry.load("remove")
