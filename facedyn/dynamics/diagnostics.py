@@ -88,14 +88,81 @@ def motion_left_beyond_sag(left: list[np.ndarray], motion: list[np.ndarray], rot
     """
     if not (len(left) == len(motion) == len(rotations)) or not left:
         raise ValueError("motion_left_beyond_sag needs one left, motion and rotation array per take, at least one take")
-    rotation = np.concatenate([r - r.mean(0) for r in rotations])
+    after, before = BeyondSag(), BeyondSag()
+    for values_left, values_motion, rotation in zip(left, motion, rotations):
+        after.add(values_left, rotation)
+        before.add(values_motion, rotation)
+    return after.norm() / max(before.norm(), 1e-30)
 
-    def beyond_sag(values: list[np.ndarray]) -> float:
-        centred = np.concatenate([v - v.mean(0) for v in values]).astype(np.float64)
-        coef, *_ = np.linalg.lstsq(rotation, centred, rcond=None)
-        return float(np.linalg.norm(centred - rotation @ coef))
 
-    return beyond_sag(left) / max(beyond_sag(motion), 1e-30)
+class BeyondSag:
+    """The norm motion_left_beyond_sag compares, summed one take at a time.
+
+    The shared sag is a least-squares fit on the centred rotation entries R; what is left
+    beyond it has the squared norm |C|^2 - (R'C) . (R'R)^+ (R'C), so a take adds only its
+    R'R, R'C and |C|^2 and need not stay in memory (a session of long takes, or several
+    removals of it scored in one pass: SessionScore)."""
+
+    def __init__(self):
+        self.rr = np.zeros((9, 9))
+        self.rc: np.ndarray | None = None
+        self.squares = 0.0
+
+    def add(self, values: np.ndarray, rotations: np.ndarray) -> None:
+        """One take: values (rows, D), rotations (rows, 9)."""
+        centred = np.asarray(values, dtype=np.float64)
+        centred = centred - centred.mean(0)
+        rotation = np.asarray(rotations, dtype=np.float64)
+        rotation = rotation - rotation.mean(0)
+        rc = rotation.T @ centred
+        if self.rc is not None and rc.shape != self.rc.shape:
+            raise ValueError(f"a take of {centred.shape[1]} values per row, the takes before {self.rc.shape[1]}")
+        self.rr += rotation.T @ rotation
+        self.rc = rc if self.rc is None else self.rc + rc
+        self.squares += float(np.einsum("ij,ij->", centred, centred))
+
+    def norm(self) -> float:
+        if self.rc is None:
+            raise ValueError("no take added")
+        explained = float(np.einsum("ij,ij->", self.rc, np.linalg.pinv(self.rr, hermitian=True) @ self.rc))
+        return float(np.sqrt(max(self.squares - explained, 0.0)))
+
+
+class SessionScore:
+    """How much of a calibration session's motion each of several removals leaves beyond
+    held shapes and sag (`usdfacedyn evaluate --session`'s figure), in one pass over the takes.
+
+    The tracker's spikes (pops, dropped frames) are replaced in each take's capture once
+    (facedyn.dynamics.spikes): a pop is no dynamics any removal could take out, so what a
+    removal leaves is the cleaned capture less its offsets. Takes are added one at a time
+    and kept only as BeyondSag sums. vertices: the face's; skip: frames left out at each
+    take's start (the expression easing in).
+    """
+
+    def __init__(self, vertices: np.ndarray, skip: int, removals: tuple[str, ...]):
+        self.vertices, self.skip = np.asarray(vertices), int(skip)
+        self.motion = BeyondSag()
+        self.left = {name: BeyondSag() for name in removals}
+
+    def add(self, captured: np.ndarray, orient: np.ndarray, offsets: dict) -> None:
+        """One take: its captured skull-space points (F, N, 3), skull orient (F, 4) and each removal's offsets (F, N, 3)."""
+        from facedyn.dynamics.spikes import replace_spikes
+        from facedyn.geometry import quaternion
+
+        if set(offsets) != set(self.left):
+            raise ValueError(f"offsets of {sorted(offsets)}, the score's removals are {sorted(self.left)}")
+        rows = len(captured) - self.skip
+        cleaned, _ = replace_spikes(np.asarray(captured)[:, self.vertices])
+        cleaned = cleaned[self.skip:].reshape(rows, -1)
+        rotations = quaternion.to_matrix(np.asarray(orient)[self.skip:]).reshape(rows, 9)
+        self.motion.add(cleaned, rotations)
+        for name, removed in offsets.items():
+            self.left[name].add(cleaned - np.asarray(removed)[self.skip:, self.vertices].reshape(rows, -1), rotations)
+
+    def motion_left(self) -> dict:
+        """{removal: the fraction of the session's motion beyond held shapes and sag it leaves}."""
+        total = max(self.motion.norm(), 1e-30)
+        return {name: sums.norm() / total for name, sums in self.left.items()}
 
 
 def band_amplitude(points: np.ndarray, fps: float, hz: float, vertices: np.ndarray) -> float:

@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 import torch
@@ -343,9 +343,9 @@ def calibration_names(model: DynamicsModel) -> dict[str, int]:
     return {t["name"]: int(t["frames"]) for t in model.info["calibration"]["takes"]}
 
 
-def remove_left_out(model: DynamicsModel, takes: list) -> list[tuple[np.ndarray, np.ndarray]]:
+def remove_left_out(model: DynamicsModel, takes: list) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Each of the response's own calibration takes removed by the response refitted on the
-    others, in order: [(quasistatic skull-space points, offsets)], float32.
+    others, in order, one take at a time: (quasistatic skull-space points, offsets), float32.
 
     What the response does to a take it has seen flatters it; refitted without the take (the
     model's own settle and ridge, its normal equations downdated, the session's stiffening
@@ -366,12 +366,16 @@ def remove_left_out(model: DynamicsModel, takes: list) -> list[tuple[np.ndarray,
     session = [_take_rows(take, model, record["settle_s"]) for take in takes]
     sums = _Sums.total(session)
     fits = _fits_without_each(session, sums, record["ridge"], _session_fit(session, sums, record["ridge"], model), model)
-    removed = []
-    for take, (weights, scale, beta) in zip(takes, fits):
-        info = {**model.info, "calibration": {**record, "hardening": beta}} if "hardening" in record else model.info
-        refitted = dataclasses.replace(model, network=_linear_network(model.network.spec, weights, scale), info=info)
-        removed.append(remove_with_response(take.points, take.translate, take.orient, take.fps, refitted, space=take.space, device="cpu"))
-    return removed
+    return (_removed_by_refit(take, model, fit) for take, fit in zip(takes, fits))
+
+
+def _removed_by_refit(take: TrainingSequence, model: DynamicsModel, fit: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """A take removed by the response with another fit's weights, scale and stiffening (remove_left_out)."""
+    weights, scale, beta = fit
+    record = model.info["calibration"]
+    info = {**model.info, "calibration": {**record, "hardening": beta}} if "hardening" in record else model.info
+    refitted = dataclasses.replace(model, network=_linear_network(model.network.spec, weights, scale), info=info)
+    return remove_with_response(take.points, take.translate, take.orient, take.fps, refitted, space=take.space, device="cpu")
 
 
 def is_linear_response(model: DynamicsModel) -> bool:

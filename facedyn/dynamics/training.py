@@ -22,6 +22,7 @@ targets)``, so the synthesis network H (one example per frame) trains through it
 """
 from __future__ import annotations
 
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Iterator, Sequence
@@ -95,6 +96,7 @@ class TrainConfig:
     skull_motion: SkullMotionInput | None = None  # skull features; None = the paper's B(t) over `window`
     sample_positions: bool = False  # F also reads each skin sample's rest position (facedyn.dynamics.removal.skin_inputs)
     resident_bytes: int = 1 << 30  # examples held in memory at once; a larger corpus streams from its store in chunks
+    time_limit_s: float | None = None  # stop before an epoch that would end past this many seconds from the trainer's start
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS:
@@ -105,6 +107,8 @@ class TrainConfig:
             raise ValueError(f"subsample must be a fraction in (0, 1], got {self.subsample}")
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be positive, got {self.learning_rate}")
+        if self.time_limit_s is not None and not self.time_limit_s > 0:
+            raise ValueError(f"time_limit_s must be positive seconds, got {self.time_limit_s}")
         if self.trim < 0:
             raise ValueError(f"trim must be a non-negative number of frames, got {self.trim}")
 
@@ -196,8 +200,13 @@ class PairSet(Resident):
         return network.normalized_split(*inputs)
 
 
-def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCallback | None = None) -> list[dict]:
+def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCallback | None = None,
+        deadline: float | None = None) -> list[dict]:
     """Adam on the L2 loss in normalized units; returns the loss curve in cm^2 per coordinate.
+
+    With a `deadline` (a time.monotonic() value) training stops after the epoch that leaves
+    less time than it took itself: the learning rate is constant, so fewer epochs are the
+    same training cut short (the epochs then depend on the machine's speed).
 
     train and val are example sets with ``chunks`` and ``subset``: resident ones
     (PairSet, synthesis.FrameSet) or StreamedExamples from a TrainingStore. Each epoch
@@ -212,6 +221,7 @@ def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCal
     checked = None if val is None or not len(val) else val.subset(config.max_validation_pairs, generator)
     curve = []
     for epoch in range(1, config.epochs + 1):
+        began = time.monotonic()
         network.train()
         total, drawn = 0.0, 0
         for chunk in train.chunks(generator):
@@ -229,19 +239,22 @@ def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCal
         curve.append({"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss})
         if progress is not None:
             progress(epoch, train_loss, val_loss)
+        now = time.monotonic()
+        if deadline is not None and now + (now - began) > deadline:
+            break
     network.eval()
     return curve
 
 
 def fit_new_network(spec: NetworkSpec, normalization, train, val, config: TrainConfig, device: torch.device,
-                    progress: ProgressCallback | None = None) -> tuple[Network, list[dict]]:
+                    progress: ProgressCallback | None = None, deadline: float | None = None) -> tuple[Network, list[dict]]:
     """A network initialized from ``config.seed`` (without touching the global RNG), fitted."""
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
         network = Network(spec)
     network.set_normalization(*normalization)
     network.to(device)
-    return network, fit(network, train, val, config, progress)
+    return network, fit(network, train, val, config, progress, deadline)
 
 
 @torch.no_grad()
@@ -411,6 +424,7 @@ def train_removal(
     progress: ProgressCallback | None = None,
     *,
     scratch: Path | str | None = None,
+    started: float | None = None,
 ) -> DynamicsModel:
     """Train network F on the takes (TrainingSequence objects or dicts, any iterable) for the given face setup.
 
@@ -418,9 +432,14 @@ def train_removal(
     take's ends are left out (their targets average over clamped windows). The skin
     features are stored as per-frame velocities and put together per batch (NumPy, no
     kernel needed). The examples go to a store in ``scratch`` (default: the system's temp folder), removed
-    afterwards; at most ``config.resident_bytes`` of them are in memory at once.
+    afterwards; at most ``config.resident_bytes`` of them are in memory at once. With
+    ``config.time_limit_s``, training stops before an epoch that would end later than that
+    many seconds from `started` (a time.monotonic() value; default: now), so a caller that
+    read the takes first can count that time in.
     """
     config = config or TrainConfig()
+    started = time.monotonic() if started is None else started
+    deadline = None if config.time_limit_s is None else started + config.time_limit_s
     device = resolve_device(config.device)
     store, described, fps = store_takes(takes, lambda take: _prepare(take, face, config), scratch, {"skin": config.window})
     with store:
@@ -431,7 +450,7 @@ def train_removal(
         inputs = ("skull", "skin") + (("positions",) if config.sample_positions else ())
         spec: NetworkSpec = removal_spec(store.columns["skull"][0], sum(store.feature_width(c) for c in inputs[1:]))
         normalization = streamed_normalization(store, names, inputs, "targets")
-        network, curve = fit_new_network(spec, normalization, train, val, config, device, progress)
+        network, curve = fit_new_network(spec, normalization, train, val, config, device, progress, deadline)
         errors = offset_errors(network, val, config.batch_size, "pairs") if val is not None else None
     network.cpu()
     info = {

@@ -6,22 +6,22 @@ The README's workflow for a real actor, as one resumable run within a stated bud
    (standard scale, tissue drawn per take, extra motions, foot-contact impacts, 0.1 mm of
    tracking noise, the Live Link performances with `--data`; facedyn.processors.corpus_writer.build_corpus);
 2. `family.removal`: the family's F trained on it with the recommended flags (true skull and
-   targets, skull accelerations, sample positions, batches of 2,000), for as many epochs of
-   `--subsample` of the pairs as fit the budget's share for it at the speed F trains on this
-   machine, measured first by a short probe on a few of the corpus's takes
-   (facedyn.processors.budget): so the default's epochs depend on the machine's speed and
-   load, and `--epochs` pins them (no probe, the same model on the same machine);
+   targets, skull accelerations, sample positions, batches of 2,000), epochs of `--subsample`
+   of the pairs until F_SHARE of the minutes the corpus left is spent (train-removal
+   --budget-minutes: it stops before an epoch that would end later, at most MAX_EPOCHS): so
+   the default's epochs depend on the machine's speed and load, and `--epochs` pins them
+   (the same model on the same machine);
 3. `synthesis.response`: the actor's linear response fitted on the session, its ridge
    chosen there (facedyn.dynamics.response), with F's samples and landmarks;
 4. the removal chosen without truth: each candidate (the family's F, the response, the mean
    of the two) scored on the session by `evaluate --session`'s figure, the fraction of the
    held takes' motion it leaves (the response's own takes each removed by the response
-   refitted without it, so its figure is a new capture's); the least-leaving is written as
+   refitted without it, so its figure is a new capture's), all three in one pass over the
+   session (each take read and cleaned of tracker spikes once); the least-leaving is written as
    `removal.removal`, `removal.response` or `removal.blend` (a blend file holding both
    models), which `remove --model` takes;
-5. `calibration.json`: every candidate's figure, the choice, the budget (the probe's
-   throughput, the epochs planned and the epochs trained with their measured seconds and
-   pairs a second) and the time each stage took.
+5. `calibration.json`: every candidate's figure, the choice, the budget (F's minutes, the
+   epochs trained with their measured seconds and pairs a second) and the time each stage took.
 
 Each stage's outputs are written atomically into the folder and recorded in
 `stages.json`; a re-run skips the stages already done with the same inputs, so an
@@ -40,11 +40,11 @@ from pathlib import Path
 from facedyn.errors import UsageError
 from facedyn.io.files import write_atomically
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.budget import PROBE_EPOCHS, PROBE_TAKES, EpochClock, planned_epochs, probe_rates, probe_takes
+from facedyn.processors.budget import EpochClock
 from facedyn.progress import Progress
 
 BUDGET_MINUTES = 45.0  # the whole command's, by default: the issue's target for a 70-take session of a 2.7k-point rig on 2 cores
-F_SHARE = 0.6  # of the minutes the corpus and the probe leave, F's training takes this share; the response and the scores the rest
+F_SHARE = 0.75  # of the minutes the corpus leaves, F's training takes this share; the response and the scores the rest
 MAX_EPOCHS = 250  # the paper's
 CANDIDATES = ("family", "response", "mean")  # the removals scored, in the order a tie keeps
 NOISE_CM = 0.01  # the recommended corpus's tracking noise
@@ -60,11 +60,11 @@ class CalibrateProcessor(Processor):
                     "(a re-run resumes in it)", resumable=True)
     parameters = (
         Parameter("rig", Path, help="the actor's UsdSkel blend-shape rig, which the family corpus is simulated on", metavar="RIG"),
-        Parameter("budget_minutes", float, BUDGET_MINUTES, "the whole calibration's time: F trains for its share of what the corpus leaves, at the speed a short "
-                  "probe measures",
+        Parameter("budget_minutes", float, BUDGET_MINUTES, "the whole calibration's time: F trains for its share of what the corpus "
+                  "leaves",
                   above=0.0, maximum=100000.0, metavar="MINUTES"),
-        Parameter("epochs", int, None, "F's training epochs (default: as many as fit the budget at F's speed measured on this "
-                  "machine, so they depend on it; at most 250)", minimum=1, maximum=100000),
+        Parameter("epochs", int, None, "F's training epochs (default: as many as fit its share of the budget on this machine, "
+                  "so they depend on it; at most 250)", minimum=1, maximum=100000),
         Parameter("subsample", float, 0.5, "fraction of the corpus's (frame, sample) pairs F draws each epoch", above=0.0, maximum=1.0),
         Parameter("data", Path, None, "a ../shared/data-like folder: the corpus adds the Live Link performances (recommended)",
                   metavar="DIR"),
@@ -132,17 +132,12 @@ class CalibrateProcessor(Processor):
         corpus_key = key_of("corpus", sha256_of_file(params["rig"]), [s.name for s in specs], specs[0].fps, corpus_description(params))
         corpus = stages.run("corpus", corpus_key, [out / "corpus"], lambda: build_family_corpus(out / "corpus", rig, specs, params, progress),
                             resumes=True)
-        probe = None
-        if params["epochs"] is None:
-            probe_key = key_of("probe", corpus_key, params["subsample"], params["seed"], PROBE_TAKES, PROBE_EPOCHS)
-            probe = stages.run("probe", probe_key, [], lambda: probe_training(out / "corpus", params, progress))
-        seconds = stages.seconds()
-        spent = seconds.get("corpus", time.perf_counter() - started) + (seconds.get("probe", 0.0) if probe is not None else 0.0)
-        budget = training_budget(params, corpus, spent, probe)
-        progress.start(f"budget {params['budget_minutes']:g} min: F trains {budget['epochs']} epochs of {budget['subsample']:.0%} of "
-                       f"{budget['pairs']:,} pairs ({budget['training_seconds_planned'] / 60:.1f} min planned)", 1)
-        progress.finish()
-        family_key = key_of("family", corpus_key, budget["epochs"], budget["subsample"], params["seed"])
+        spent = stages.seconds().get("corpus", time.perf_counter() - started)
+        budget = training_budget(params, corpus, spent)
+        limit = (f"{budget['epochs']} epochs" if budget["epochs_given"] else
+                 f"{budget['training_seconds_planned'] / 60:.1f} min (at most {budget['epochs']} epochs)")
+        progress.note(f"budget {params['budget_minutes']:g} min: F trains {limit} of {budget['subsample']:.0%} of {budget['pairs']:,} pairs")
+        family_key = key_of("family", corpus_key, budget["epochs"], budget["training_seconds_planned"], budget["subsample"], params["seed"])
         family = stages.run("family", family_key, [out / "family.removal"],
                             lambda: train_family(out / "corpus", out / "family.removal", budget, corpus, params, progress))
         response_key = key_of("response", family_key, session, params["ridge"], params["settle"])
@@ -150,12 +145,9 @@ class CalibrateProcessor(Processor):
                               lambda: fit_response(roots, out / "family.removal", out / "synthesis.response", params, progress))
         models = {"family": (out / "family.removal", None), "response": (out / "synthesis.response", None),
                   "mean": (out / "family.removal", out / "synthesis.response")}
-        figures = {}
-        for name in CANDIDATES:
-            key = key_of("score", name, family_key if name != "response" else "", response_key if name != "family" else "", session,
-                         params["skip"])
-            folder = out / "scores" / name
-            figures[name] = stages.run(f"score {name}", key, [folder], lambda: score(roots, *models[name], folder, params, progress))
+        scores_key = key_of("scores", family_key, response_key, session, params["skip"])
+        figures = stages.run("scores", scores_key, [], lambda: score_candidates(roots, out / "family.removal", out / "synthesis.response",
+                                                                                params, progress))
         chosen = min(CANDIDATES, key=lambda name: figures[name]["session_motion_left"])
         removal = write_removal(out, chosen)
         record = {"chosen": chosen, "removal": removal.name, "synthesis": "synthesis.response",
@@ -200,54 +192,36 @@ def build_family_corpus(folder: Path, rig, specs: list, params: dict, progress: 
     return {"takes": len(index["takes"]), "failed": len(index["failed"]), "frames": int(index["frames"])}
 
 
-def training_budget(params: dict, corpus: dict, spent_seconds: float, probe: dict | None) -> dict:
-    """F's epochs and subsample: --epochs, else as many epochs of --subsample of the corpus's
-    pairs as fit F_SHARE of the minutes the corpus and the probe left, at the probe's speed."""
-    pairs = corpus["frames"] * F_SAMPLES
+def training_budget(params: dict, corpus: dict, spent_seconds: float) -> dict:
+    """F's epochs and subsample: --epochs, else epochs of --subsample of the corpus's pairs for
+    F_SHARE of the minutes the corpus left (at least a second: one epoch), at most MAX_EPOCHS."""
+    given = params["epochs"] is not None
     left_s = max(params["budget_minutes"] * 60.0 - spent_seconds, 0.0)
-    train_s = F_SHARE * left_s
-    plan = {"epochs": params["epochs"]} if probe is None else planned_epochs(train_s, probe, corpus["frames"], MAX_EPOCHS)
-    return {**plan, "subsample": params["subsample"], "pairs": pairs, "training_seconds_planned": round(train_s, 1),
-            "epochs_given": params["epochs"] is not None, "probe": probe}
+    return {"epochs": params["epochs"] if given else MAX_EPOCHS, "epochs_given": given, "subsample": params["subsample"],
+            "pairs": corpus["frames"] * F_SAMPLES, "training_seconds_planned": None if given else round(max(F_SHARE * left_s, 1.0), 1)}
 
 
-def train_f(inputs: list[Path], output: Path, epochs: int, params: dict, progress: Progress) -> EpochClock:
-    """F trained with train-removal's recommended flags; the clock of its epochs."""
+def train_f(inputs: list[Path], output: Path, epochs: int, seconds: float | None, params: dict, progress: Progress) -> EpochClock:
+    """F trained with train-removal's recommended flags, for `epochs` or until `seconds` are spent; the clock of its epochs."""
     from facedyn.processors import registry
     from facedyn.processors.runner import execute
 
     clock = EpochClock(progress)
     execute(registry.load("train-removal"), Request(inputs, output, params={
         "skull": "truth", "target": "truth", "skull_features": "acceleration", "sample_positions": True, "batch_size": 2000,
-        "epochs": epochs, "subsample": params["subsample"], "seed": params["seed"]}), clock)
+        "epochs": epochs, "budget_minutes": None if seconds is None else seconds / 60.0, "subsample": params["subsample"],
+        "seed": params["seed"]}), clock)
     return clock
 
 
-def probe_training(corpus: Path, params: dict, progress: Progress) -> dict:
-    """F's speed on this machine: PROBE_EPOCHS epochs on PROBE_TAKES of the corpus's takes, timed
-    (facedyn.processors.budget); the model is thrown away."""
-    import tempfile
-
-    takes = json.loads((corpus / "corpus.json").read_text())["takes"]
-    entries = {take["name"]: take for take in takes}
-    names = probe_takes([take["name"] for take in takes])
-    started = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix=".probe.", dir=corpus.parent) as scratch:
-        clock = train_f([corpus / entries[name]["folder"] for name in names], Path(scratch) / "probe.removal", PROBE_EPOCHS, params,
-                        progress)
-    frames = sum(entries[name]["frames"] for name in names)
-    return {"takes": len(names), **probe_rates(time.perf_counter() - started, clock.epoch_seconds(), frames,
-                                                F_SAMPLES * params["subsample"])}
-
-
 def train_family(corpus: Path, output: Path, budget: dict, size: dict, params: dict, progress: Progress) -> dict:
-    """Stage 2: the family's F with train-removal's recommended flags, its epochs the budget's;
-    what its epochs took (the first includes building the feature store) and its throughput in
-    (frame, sample) pairs drawn a second, over the epochs after the first."""
+    """Stage 2: the family's F with train-removal's recommended flags, for the budget's epochs or
+    minutes; what its epochs took (the first includes reading the takes into the feature store)
+    and its throughput in (frame, sample) pairs drawn a second, over the epochs after the first."""
     import statistics
 
     started = time.perf_counter()
-    epochs = train_f([corpus], output, budget["epochs"], params, progress).epoch_seconds()
+    epochs = train_f([corpus], output, budget["epochs"], budget["training_seconds_planned"], params, progress).epoch_seconds()
     steady = statistics.median(epochs[1:] or epochs)
     return {"seconds": round(time.perf_counter() - started, 1), "epochs": len(epochs), "first_epoch_seconds": epochs[0],
             "median_epoch_seconds": round(steady, 3),
@@ -276,15 +250,36 @@ def fit_response(roots: list, family: Path, output: Path, params: dict, progress
     return {key: record[key] for key in ("ridge", "ridge_candidates", "session_cross_validated_left", "hardening")}
 
 
-def score(roots: list, removal: Path, blend: Path | None, folder: Path, params: dict, progress: Progress) -> dict:
-    """Stage 4: what a candidate removal leaves of the session's motion (`evaluate --session`)."""
-    from facedyn.processors import registry
-    from facedyn.processors.runner import execute
+def score_candidates(roots: list, family: Path, response: Path, params: dict, progress: Progress) -> dict:
+    """Stage 4: what each candidate removal leaves of the session's motion (`evaluate --session`'s
+    figure), in one pass: each take read once, removed by the family's F and by the response
+    refitted without it (remove_left_out), the mean of the two as a blend averages them."""
+    import numpy as np
 
-    execute(registry.load("evaluate"), Request(list(roots), folder, params={"session": True, "removal": removal, "blend": blend,
-                                                                          "skip": params["skip"]}), progress)
-    report = json.loads((folder / "report.json").read_text())
-    return {"session_motion_left": report["session"]["motion_left_beyond_sag"]}
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.dynamics.response import remove_left_out
+    from facedyn.dynamics.training import TrainingSequence
+    from facedyn.performance import QUASISTATIC
+    from facedyn.processors.model_steps import removal_of, session_motion_left
+    from facedyn.processors.training_inputs import take_name
+    from facedyn.usd.take import read_take_below
+
+    takes = [read_take_below(root, QUASISTATIC)[0] for root in roots]  # the stabilized takes, as remove reads them
+    f = load_model(family, topology=takes[0].topology, fps=takes[0].fps)
+    left_out = remove_left_out(load_model(response, topology=takes[0].topology, fps=takes[0].fps),
+                               [TrainingSequence.from_performance(perf, take_name(root)) for root, perf in zip(roots, takes)])
+
+    def removals():
+        for perf, (_, by_response) in zip(takes, left_out):
+            _, by_family = removal_of(perf.points, *perf.skull(), perf.fps, f)
+            yield perf, {"family": by_family, "response": by_response,
+                         "mean": np.mean([by_family, by_response], axis=0).astype(np.float32)}  # as model_steps.mean_removal
+            progress.advance()
+
+    progress.start(f"score {', '.join(CANDIDATES)} on the session ({len(takes)} takes)", len(takes))
+    figures = session_motion_left(removals(), CANDIDATES, params["skip"])
+    progress.finish()
+    return {name: {"session_motion_left": figures[name]} for name in CANDIDATES}
 
 
 def write_removal(out: Path, chosen: str) -> Path:

@@ -30,7 +30,8 @@ import numpy as np
 from facedyn.errors import UsageError
 from facedyn.performance import QUASISTATIC, SYNTHESIZED
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.model_steps import SYNTHESIZES, check_skull_frame, mean_removal, removal_models, removal_of
+from facedyn.processors.model_steps import (SYNTHESIZES, check_skull_frame, mean_removal, removal_models, removal_of,
+                                            session_motion_left)
 from facedyn.progress import Progress
 
 QUASISTATIC_BELOW = SYNTHESIZED  # evaluate reads what remove wrote: everything below the synthesized role
@@ -102,11 +103,10 @@ class EvaluateProcessor(Processor):
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
         request, read, synthesis, removals = plan.state
         params = request.params
-        if removals:
-            read = removed_by(read, removals)
+        removed = removed_by(read, removals) if removals else read
         progress.start("evaluate takes", len(read))
         takes, per_take = [], []
-        for path, perf in read:
+        for path, perf in removed:
             takes.append((path, perf))
             per_take.append(take_diagnostics(path, perf, params["frequency"], synthesis))
             progress.advance()
@@ -115,7 +115,7 @@ class EvaluateProcessor(Processor):
         if params["held_expression"]:
             report["held_expression"] = spread_diagnostics(takes, params["skip"])
         if params["session"]:
-            report["session"] = session_diagnostics(takes, params["skip"])
+            report["session"] = session_diagnostics(read, removed, params["skip"])
         output = Path(request.output)
         output.mkdir(parents=True, exist_ok=True)
         (output / "report.json").write_text(json.dumps(report, indent=2, sort_keys=True) + "\n")
@@ -175,7 +175,7 @@ def _removals(read: list, model) -> list:
 
     names = [take_name(path) for path, _ in read]
     if is_linear_response(model) and names[0] in calibration_names(model):  # its own session (check_response_takes)
-        return remove_left_out(model, [TrainingSequence.from_performance(perf, name) for (_, perf), name in zip(read, names)])
+        return list(remove_left_out(model, [TrainingSequence.from_performance(perf, name) for (_, perf), name in zip(read, names)]))
     from facedyn.dynamics.portable import for_take, is_portable
 
     # a person-independent model is set up for each take (its own rest shape and skull frame)
@@ -245,29 +245,13 @@ def spread_diagnostics(takes: list, skip_s: float) -> dict:
             "per_frame_ratio": round(after["per_frame_cm"] / before["per_frame_cm"], 4) if before["per_frame_cm"] > 0 else None}
 
 
-def session_diagnostics(takes: list, skip_s: float) -> dict:
-    """The fraction of the session's motion the removal leaves, beyond held shapes and sag.
-
-    The tracker's spikes (pops, dropped frames) are replaced in the capture, and the removal's
-    output is moved with it, as the linear response's own figure reads the session: a pop
-    is no dynamics any removal could take out."""
-    from facedyn.dynamics.diagnostics import motion_left_beyond_sag
-    from facedyn.dynamics.spikes import replace_spikes
-    from facedyn.geometry import quaternion
-
-    first = takes[0][1]
-    fv, skip = face_vertices(first), int(round(skip_s * first.fps))
-    if any(perf.frame_count <= skip + 2 for _, perf in takes):
-        raise UsageError(f"--skip {skip_s:g}: leaves too few frames of the shortest take")
-    left, motion, rotations = [], [], []
-    for _, perf in takes:
-        rows = perf.frame_count - skip
-        captured = (perf.points + perf.offsets)[:, fv].astype(np.float64)
-        cleaned, _ = replace_spikes(captured)
-        left.append((perf.points[:, fv] - (captured - cleaned))[skip:].reshape(rows, -1))
-        motion.append(cleaned[skip:].reshape(rows, -1))
-        rotations.append(quaternion.to_matrix(perf.skull()[1][skip:]).reshape(rows, 9))
-    return {"motion_left_beyond_sag": round(motion_left_beyond_sag(left, motion, rotations), 4)}
+def session_diagnostics(read: list, removed: list, skip_s: float) -> dict:
+    """The fraction of the session's motion the removal leaves, beyond held shapes and sag
+    (facedyn.processors.model_steps.session_motion_left): read, the takes as read (the
+    capture is their points, plus the offsets of a removal read from their layers);
+    removed, the same takes after the removal."""
+    pairs = ((perf, {"removal": after.offsets}) for (_, perf), (_, after) in zip(read, removed))
+    return {"motion_left_beyond_sag": session_motion_left(pairs, ("removal",), skip_s)["removal"]}
 
 
 def _headline(report: dict) -> dict:

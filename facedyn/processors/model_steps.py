@@ -96,6 +96,32 @@ def mean_removal(removed: list) -> tuple[np.ndarray, np.ndarray]:
     return tuple(np.mean([r[i] for r in removed], axis=0).astype(np.float32) for i in (0, 1))
 
 
+def session_motion_left(takes, names: tuple[str, ...], skip_s: float) -> dict:
+    """{removal: the fraction of a calibration session's motion it leaves beyond held shapes
+    and sag}, `evaluate --session`'s figure (facedyn.dynamics.diagnostics.SessionScore).
+
+    takes: (Performance, {removal name: its offsets (F, N, 3)}) one take at a time (a
+    generator keeps one take's removals in memory); the Performance's points (plus the
+    offsets it holds, when its removal was read from its layers) are the capture. Every
+    removal is scored in the same pass, each take's capture cleaned of tracker spikes once.
+    """
+    from facedyn.dynamics.diagnostics import SessionScore
+
+    score = None
+    for perf, offsets in takes:
+        skip = int(round(skip_s * perf.fps))
+        if perf.frame_count <= skip + 2:
+            raise UsageError(f"--skip {skip_s:g}: leaves too few of a session take's {perf.frame_count} frames")
+        if score is None:
+            vertices = np.arange(perf.point_count) if perf.face_vertices is None else np.asarray(perf.face_vertices)
+            score = SessionScore(vertices, skip, names)
+        captured = perf.points if perf.offsets is None else perf.points + perf.offsets
+        score.add(captured, perf.skull()[1], offsets)
+    if score is None:
+        raise UsageError("a session figure needs at least one take")
+    return {name: round(left, 4) for name, left in score.motion_left().items()}
+
+
 def context_frames(model) -> int:
     """Frames of context on each side that make a chunk's result equal to the whole take's.
 

@@ -26,10 +26,9 @@ def _matches(name: str, patterns: str) -> bool:
     return any(fnmatch.fnmatch(name, pattern.strip()) for pattern in patterns.split(",") if pattern.strip())
 
 
-def load_takes(inputs: list[Path], params: dict, progress: Progress) -> list:
-    """(name, Performance) of every selected take, all of one topology; validation names checked."""
-    from facedyn.usd.errors import TakeError
-    from facedyn.usd.training_data import read_training_take, take_roots
+def select_takes(inputs: list[Path], params: dict) -> list[tuple[str, Path]]:
+    """(name, root) of every take --include/--exclude select, validation names checked."""
+    from facedyn.usd.training_data import take_roots
 
     named = [(take_name(root), root) for root in take_roots(inputs)]
     if params["include"]:
@@ -41,17 +40,63 @@ def load_takes(inputs: list[Path], params: dict, progress: Progress) -> list:
     missing = [name for name in validation_names(params) or () if name not in {n for n, _ in named}]
     if missing:
         raise UsageError(f"--validation: no take named {', '.join(missing)} among the {len(named)} selected takes")
+    return named
+
+
+def load_takes(inputs: list[Path], params: dict, progress: Progress) -> list:
+    """(name, Performance) of every selected take, all of one topology; validation names checked."""
+    from facedyn.usd.training_data import read_training_take
+
+    named = select_takes(inputs, params)
     takes = []
     progress.start("read takes", len(named))
     for name, root in named:
         perf, _ = read_training_take(root, params["skull"])
-        if takes and perf.topology.fingerprint() != takes[0][1].topology.fingerprint():
-            raise TakeError(f"{root}: its mesh topology differs from {takes[0][0]}'s; a model is trained for one topology")
+        check_topology(takes, name, perf, root)
         takes.append((name, perf))
         progress.advance()
     progress.finish()
     training_skull_frame(takes)
     return takes
+
+
+def take_heads(named: list[tuple[str, Path]], skull: str) -> list[tuple[str, object, int]]:
+    """(name, the take's first frame, its frame count) of each take, all of one topology and
+    skull frame: what a trainer checks and sets up from before it reads any take whole."""
+    from facedyn.usd.training_data import read_training_head
+
+    heads = []
+    for name, root in named:
+        head, frames = read_training_head(root, skull)
+        check_topology(heads, name, head, root)
+        heads.append((name, head, frames))
+    training_skull_frame([(name, head) for name, head, _ in heads])
+    return heads
+
+
+def training_sequences(named: list[tuple[str, Path]], skull: str, truth: bool):
+    """Each take as a TrainingSequence, read when the trainer asks for it (with its true
+    dynamics from the corpus when `truth`): a trainer holds one take's frames at a time."""
+    from dataclasses import replace
+
+    from facedyn.dynamics.training import TrainingSequence
+    from facedyn.usd.corpus import read_truth
+    from facedyn.usd.training_data import read_training_take
+
+    for name, root in named:
+        perf, _ = read_training_take(root, skull)
+        sequence = TrainingSequence.from_performance(perf, name)
+        if truth:
+            sequence = replace(sequence, dynamics=read_truth(root if root.is_dir() else root.parent).offsets)
+        yield sequence
+
+
+def check_topology(takes: list, name: str, perf, root: Path) -> None:
+    """A model is trained for one topology: refuse a take whose mesh differs from the first's."""
+    from facedyn.usd.errors import TakeError
+
+    if takes and perf.topology.fingerprint() != takes[0][1].topology.fingerprint():
+        raise TakeError(f"{root}: its mesh topology differs from {takes[0][0]}'s; a model is trained for one topology")
 
 
 def training_skull_frame(takes: list) -> str | None:

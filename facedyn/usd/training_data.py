@@ -14,7 +14,7 @@ from pxr import Sdf, Usd
 from facedyn.performance import CAPTURED, QUASISTATIC, Performance
 from facedyn.usd.corpus import CORPUS_INDEX, read_corpus_index
 from facedyn.usd.errors import TakeError
-from facedyn.usd.take import TakeSource, read_stage, read_take_below
+from facedyn.usd.take import TakeSource, find_face_mesh, read_stage, select_time_codes, stage_below
 from facedyn.usd.timing import Timing
 
 SKULL_SOURCES = ("take", "truth")
@@ -38,6 +38,26 @@ def take_roots(inputs: list[Path]) -> list[Path]:
 
 def read_training_take(root: Path, skull: str = "take", frames=None) -> tuple[Performance, TakeSource]:
     """A take with its skull solved: the take's own (it must be stabilized) or the simulator's truth."""
+    stage, path = training_stage(root, skull)
+    perf, source = read_stage(stage, path, frames=frames)
+    _check_stabilized(path, perf, skull)
+    return perf, source
+
+
+def read_training_head(root: Path, skull: str = "take") -> tuple[Performance, int]:
+    """(the take's first frame as read_training_take reads it, its frame count): what a trainer
+    checks and sets up from before it reads each take's frames in turn."""
+    stage, path = training_stage(root, skull)
+    time_codes = select_time_codes(stage, find_face_mesh(stage), None)
+    first = float(time_codes[0])
+    head, _ = read_stage(stage, path, frames=(first, first))
+    _check_stabilized(path, head, skull)
+    return head, len(time_codes)
+
+
+def training_stage(root: Path, skull: str) -> tuple[Usd.Stage, Path]:
+    """(the stage a trainer reads the take from, the path that names it): the take below its
+    removal, or the capture under the simulator's true skull."""
     if skull not in SKULL_SOURCES:
         raise ValueError(f"skull must be one of {SKULL_SOURCES}, got {skull!r}")
     folder = root if root.is_dir() else None
@@ -49,9 +69,11 @@ def read_training_take(root: Path, skull: str = "take", frames=None) -> tuple[Pe
         layer = Sdf.Layer.CreateAnonymous(".usda")
         Timing.from_layer(Sdf.Layer.FindOrOpen(str(capture))).apply(layer)  # the in-memory root keeps the take's rate
         layer.subLayerPaths = [str(truth_skull), str(capture)]
-        return read_stage(Usd.Stage.Open(layer), truth_skull, frames=frames)
+        return Usd.Stage.Open(layer), truth_skull
     path = folder / "take.usda" if folder else root
-    perf, source = read_take_below(path, QUASISTATIC, frames=frames)  # the stabilized capture, not a removal attached above it
-    if perf.skull_orient is None or perf.role == CAPTURED:
+    return stage_below(path, QUASISTATIC), path  # the stabilized capture, not a removal attached above it
+
+
+def _check_stabilized(path: Path, perf: Performance, skull: str) -> None:
+    if skull == "take" and (perf.skull_orient is None or perf.role == CAPTURED):
         raise TakeError(f"{path}: the take is not stabilized (run `usdfacedyn stabilize` first, or train with --skull truth)")
-    return perf, source

@@ -64,3 +64,56 @@ def test_on_simulated_truth_the_true_removal_passes_every_diagnostic():
     after = diagnostics.held_expression_spread([t.quasistatic for t in takes], fv, skip)
     before = diagnostics.held_expression_spread([t.quasistatic + t.offsets for t in takes], fv, skip)
     assert after["per_frame_cm"] < 0.3 * before["per_frame_cm"]
+
+
+def test_the_streamed_sag_norm_is_the_least_squares_residual_of_all_takes_at_once():
+    """BeyondSag adds takes one at a time; its norm is that of the residual of one least-squares
+    fit of the centred values on the centred rotation entries over every take, as written out."""
+    from facedyn.dynamics.diagnostics import BeyondSag, motion_left_beyond_sag
+
+    rng = np.random.default_rng(3)
+    values = [rng.normal(size=(n, 12)) + rng.normal(size=12) for n in (40, 55, 31)]
+    rotations = [rng.normal(size=(len(v), 9)) * 1e-2 + np.eye(3).ravel() for v in values]
+    sag = rng.normal(size=(9, 12))
+    values = [v + (r - r.mean(0)) @ sag for v, r in zip(values, rotations)]
+    centred = np.concatenate([v - v.mean(0) for v in values])
+    rotation = np.concatenate([r - r.mean(0) for r in rotations])
+    coef, *_ = np.linalg.lstsq(rotation, centred, rcond=None)
+    streamed = BeyondSag()
+    for v, r in zip(values, rotations):
+        streamed.add(v, r)
+    assert streamed.norm() == pytest.approx(np.linalg.norm(centred - rotation @ coef), rel=1e-9)
+    left = [0.3 * v for v in values]
+    assert motion_left_beyond_sag(left, values, rotations) == pytest.approx(0.3, rel=1e-9)
+
+
+def test_a_session_score_ranks_removals_in_one_pass_as_each_alone_would():
+    """Several removals scored together give each the figure it gets alone, and what a removal
+    leaves is the capture with its tracker spikes replaced, less its offsets: the true offsets
+    leave only the noise, none leave everything."""
+    from facedyn.dynamics.diagnostics import SessionScore
+
+    rng = np.random.default_rng(5)
+    frames, points = 120, 30
+    vertices, skip = np.arange(20), 10
+    takes = []
+    for k in range(3):
+        held = rng.normal(size=(points, 3))
+        angle = 0.02 * np.sin(np.arange(frames) * (0.3 + 0.1 * k))
+        orient = np.stack([np.cos(angle / 2), np.sin(angle / 2), 0 * angle, 0 * angle], axis=1)
+        offsets = 0.05 * np.sin(np.arange(frames)[:, None, None] * 0.7 + rng.normal(size=(1, points, 3)))
+        noise = 1e-4 * rng.normal(size=(frames, points, 3))
+        takes.append((held + offsets + noise, orient, offsets))
+    together = SessionScore(vertices, skip, ("truth", "none", "half"))
+    alone = {name: SessionScore(vertices, skip, (name,)) for name in ("truth", "none", "half")}
+    for captured, orient, offsets in takes:
+        removals = {"truth": offsets, "none": 0 * offsets, "half": 0.5 * offsets}
+        together.add(captured, orient, removals)
+        for name, score in alone.items():
+            score.add(captured, orient, {name: removals[name]})
+    figures = together.motion_left()
+    assert figures == {name: score.motion_left()[name] for name, score in alone.items()}
+    assert figures["none"] == pytest.approx(1.0) and figures["truth"] < 0.01
+    assert figures["half"] == pytest.approx(0.5, abs=0.01)
+    with pytest.raises(ValueError, match="removals"):
+        together.add(*takes[0][:2], {"truth": takes[0][2]})

@@ -189,3 +189,19 @@ def test_pairset_gathers_frame_and_sample_inputs():
     skin = velocities[window[f], s[:, None]].reshape(3, -1)
     np.testing.assert_array_equal(x.numpy(), np.concatenate([skull[f], skin, positions[f, s]], axis=1))
     np.testing.assert_array_equal(y.numpy(), targets[f, s])
+
+
+def test_a_time_limit_stops_training_before_an_epoch_that_would_overrun_it(corpus):
+    """A limit already spent gives one epoch (there is always one); a far one, every epoch;
+    the one epoch is the first epoch of the unlimited training (the limit only cuts it short)."""
+    import time
+
+    face, takes = corpus
+    config = TrainConfig(epochs=3, batch_size=1000, validation=("platform_3",), seed=0)
+    whole = train_removal(takes, face, config)
+    cut = train_removal(takes, face, TrainConfig(**{**config.__dict__, "time_limit_s": 1e-3}), started=time.monotonic() - 1.0)
+    far = train_removal(takes, face, TrainConfig(**{**config.__dict__, "time_limit_s": 1e6}))
+    assert len(cut.info["loss_curve"]) == 1 and len(far.info["loss_curve"]) == len(whole.info["loss_curve"]) == 3
+    assert cut.info["loss_curve"][0] == whole.info["loss_curve"][0]
+    with pytest.raises(ValueError, match="time_limit_s"):
+        TrainConfig(time_limit_s=0.0)
