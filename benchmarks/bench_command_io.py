@@ -15,14 +15,16 @@ layer writing (time samples and the file's export) and everything else ("compute
 timed apart; the layer's size; the machine's load average (it may be shared: the best
 run is the figure, the load says how busy it was).
 
-    python benchmarks/bench_command_io.py [--frames 1000] [--repeats 3] [--rig PATH]
+    python benchmarks/bench_command_io.py [--frames 1000] [--repeats 3] [--rig PATH] [--out FILE] [--note TEXT]
+
+The propagation matrix of the models' face is kept on disk after its first solve
+(facedyn.dynamics.propagator_cache): the first run on a machine solves it (1.5-3 s more),
+later runs (and so the best of --repeats) read it.
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import io
-import json
 import os
 import resource
 import subprocess
@@ -36,6 +38,7 @@ import torch
 
 from bench_remove_speed import FPS, ICT_RIG, SAMPLES, take, write_still_take
 from bench_synthesize_speed import synthesis_model
+from harness import Recorder, parser
 
 
 class StepClock:
@@ -123,13 +126,13 @@ def steps_in_process(argv: list[str]) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=1000)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--rig", type=Path, default=ICT_RIG)
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, default=1000)
+    arguments.add_argument("--repeats", type=int, default=3)
+    arguments.add_argument("--rig", type=Path, default=ICT_RIG)
+    args = arguments.parse_args()
     load_before = os.getloadavg()
-    with tempfile.TemporaryDirectory(prefix="facedyn-bench-io-") as scratch:
+    with tempfile.TemporaryDirectory(prefix="facedyn-bench-io-") as scratch, Recorder("bench_command_io", args) as record:
         folder = Path(scratch)
         root, points = build_take(folder, args.frames, args.rig)
         for name in ("remove", "synthesize"):
@@ -138,16 +141,16 @@ def main() -> None:
             steps = min((steps_in_process(argv) for _ in range(args.repeats)), key=lambda s: s["total"])
             output = Path(argv[3])
             best = min(r[0] for r in runs)
-            print(json.dumps({
+            record({
                 "case": f"{name} command", "mesh": args.rig.stem, "points": points, "frames": args.frames,
-                "command": "usdfacedyn " + " ".join(a.replace(scratch, "$TMP") for a in argv),
+                "usdfacedyn_command": "usdfacedyn " + " ".join(a.replace(scratch, "$TMP") for a in argv),
                 "command_seconds": round(best, 3), "command_seconds_all_runs": [round(r[0], 3) for r in runs],
                 "command_cpu_seconds": round(min(r[1] for r in runs), 3),
                 "frames_per_s": round(args.frames / best, 1), "target_frames_per_s": 1000,
                 "steps_in_process_s": steps, "layer_mb": round(output.stat().st_size / 2**20, 1),
                 "cpu_count": os.cpu_count(),
                 "load_average": {"before": [round(x, 2) for x in load_before], "after": [round(x, 2) for x in os.getloadavg()]},
-            }), flush=True)
+            })
 
 
 if __name__ == "__main__":

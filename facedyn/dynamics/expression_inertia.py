@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import fft as sfft
-from scipy.signal import butter, filtfilt
 
 LOWPASS_HZ = 5.0  # below the family's 5-9 Hz tissue band's ring (about 15 % above soft_hz)
 _ORDER = 2  # Butterworth order, run forwards and backwards
@@ -86,6 +85,8 @@ def expression_inertia(kernel: np.ndarray, skin: np.ndarray, fps: float, future:
     frames = len(y)
     if frames < 3:
         return np.zeros_like(y)
+    from scipy.signal import butter, filtfilt  # here: scipy.signal takes ~1 s to import, and remove/synthesize with F or H never filter
+
     b, a = butter(_ORDER, lowpass_hz / (0.5 * fps))
     smooth = filtfilt(b, a, y, axis=0, padlen=min(3 * max(len(a), len(b)), frames - 1))
     acc = np.zeros_like(y)

@@ -141,11 +141,12 @@ class DynamicsModel:
             raise ModelMismatch(f"the {self.kind} model was trained at {self.fps:g} fps, but this take runs at {float(fps):g} fps; its velocity windows would not match (resample the capture with `usdfacedyn import CAPTURE --fps {self.fps:g}`)")
 
     def propagator(self):
-        """The sample-to-mesh propagation of this model's face, built once."""
+        """The sample-to-mesh propagation of this model's face, built once (its solve kept on disk for later runs)."""
         if self._propagator is None:
             from facedyn.dynamics.propagate import build_propagator
 
-            self._propagator = build_propagator(self.face.rest_points, self.face.topology.triangles(), self.face.samples, self.face.rigid_vertices)
+            self._propagator = build_propagator(self.face.rest_points, self.face.topology.triangles(), self.face.samples,
+                                                self.face.rigid_vertices, cache=True)
         return self._propagator
 
 

@@ -27,6 +27,7 @@ import torch
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 
+from facedyn.dynamics import propagator_cache
 from facedyn.geometry.mesh import cotangent_laplacian, mass_matrix, unique_edges
 from facedyn.kernels import runtime
 
@@ -74,8 +75,12 @@ class Propagator:
         return np.sqrt(energy)
 
 
-def build_propagator(rest_points, triangles, samples, rigid=None) -> Propagator:
-    """P for a rest mesh, its sample vertices and its rigid vertices (default: none)."""
+def build_propagator(rest_points, triangles, samples, rigid=None, cache: bool = False) -> Propagator:
+    """P for a rest mesh, its sample vertices and its rigid vertices (default: none).
+
+    cache: take P from the on-disk cache of solved matrices and keep it there when solved
+    (facedyn.dynamics.propagator_cache): the same P, without the solve on a later run.
+    """
     pts = np.asarray(rest_points, dtype=np.float64)
     n = len(pts)
     samples = np.asarray(samples, dtype=np.int64)
@@ -97,6 +102,23 @@ def build_propagator(rest_points, triangles, samples, rigid=None) -> Propagator:
     is_sample = np.zeros(n, bool)
     is_sample[samples] = True
     free = np.flatnonzero(~fixed & ~is_sample)
+    cache_key = propagator_cache.key(pts, triangles, samples, rigid) if cache else None
+    matrix = propagator_cache.load(cache_key, samples, n) if cache else None
+    if matrix is None:
+        matrix = _solve(lap, inv_mass, samples, free, n)
+        if cache:
+            propagator_cache.keep(cache_key, matrix)
+    return Propagator(
+        matrix=matrix,
+        samples=samples.astype(np.int32),
+        rigid=np.flatnonzero(fixed).astype(np.int32),
+        laplacian=lap,
+        inverse_mass=inv_mass,
+    )
+
+
+def _solve(lap: sp.csr_matrix, inv_mass: np.ndarray, samples: np.ndarray, free: np.ndarray, n: int) -> np.ndarray:
+    """(N, S) float32 P: the identity at the samples, solved at the free vertices, 0 elsewhere."""
     p = np.zeros((n, len(samples)))
     p[samples, np.arange(len(samples))] = 1.0
     if free.size:
@@ -104,13 +126,7 @@ def build_propagator(rest_points, triangles, samples, rigid=None) -> Propagator:
         q_free = q[free][:, free].tocsc()
         rhs = -(q[free][:, samples]).toarray()
         p[free] = splu(q_free).solve(rhs)  # COLAMD ordering: the fastest of SuperLU's here
-    return Propagator(
-        matrix=p.astype(np.float32),
-        samples=samples.astype(np.int32),
-        rigid=np.flatnonzero(fixed).astype(np.int32),
-        laplacian=lap,
-        inverse_mass=inv_mass,
-    )
+    return p.astype(np.float32)
 
 
 def _unconstrained(n: int, triangles, constrained: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ density changes within millimetres around the lips and eyelids (see `_march`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -117,6 +117,18 @@ class UVNeighbourhoods:
             charts=chart.astype(np.int32),
             step=float(step),
         )
+
+    def compact(self) -> tuple[np.ndarray, "UVNeighbourhoods"]:
+        """(the vertices stretch reads, these neighbourhoods indexing into them).
+
+        Stretch reads a few thousand of a mesh's vertices; what is computed over frames before
+        it (the expression shape's moving average) need only run on those columns, and gives
+        the same stretch: points[:, used] with the compact neighbourhoods reads the same values.
+        """
+        used = np.unique(np.concatenate([self.samples.ravel(), self.vertices.ravel()]))
+        position = np.zeros(int(used[-1]) + 1, np.int32)
+        position[used] = np.arange(len(used), dtype=np.int32)
+        return used, replace(self, samples=position[self.samples], vertices=position[self.vertices])
 
     def signed_weights(self) -> tuple[np.ndarray, np.ndarray]:
         """(S, 2, 6) vertices and weights with the minus end negated: D = sum_k w_k y[v_k] (weights sum to 0)."""

@@ -211,8 +211,11 @@ def synthesize_dynamics(
     if is_linear_response(model):
         b = model.skull_input.features(t, q, model.face.landmarks, fps)
         response = synthesized_dynamics(model, b, y[:, model.face.samples], fps, device)
-    nb, lengths = model_stretch(model) if response is None else (None, None)
-    shape = expression_shape(y, model.windows.get("stretch_smoothing", 0)) if response is None else None
+    nb = lengths = shape = None
+    if response is None:  # the expression shape on the vertices stretch reads only (the same stretch, a fifth of the work on ICT)
+        nb, lengths = model_stretch(model)
+        used, nb = nb.compact()
+        shape = expression_shape(y[:, used], model.windows.get("stretch_smoothing", 0))
     propagator = model.propagator()
     network = model.network.to(resolve_device(device)).eval()
     dev = next(network.parameters()).device

@@ -184,6 +184,22 @@ def test_bad_inputs_raise_clear_errors():
 
 # --- OpenCL parity ---------------------------------------------------------------------
 
+@pytest.mark.parametrize("backend", ["numpy", "opencl"])
+def test_compact_neighbourhoods_read_the_same_stretch_from_the_used_vertices_alone(backend):
+    if backend == "opencl":
+        opencl_or_skip()
+    points, topology, uvs, seam = cylinder()
+    nb = UVNeighbourhoods.build(topology, uvs, points, np.arange(5, len(points), 211))
+    used, compact = nb.compact()
+    assert len(used) < len(points) / 4 and np.array_equal(used, np.unique(used))
+    assert np.array_equal(used[compact.samples], nb.samples) and np.array_equal(used[compact.vertices], nb.vertices)
+    rng = np.random.default_rng(5)
+    frames = (points[None] * rng.uniform(0.8, 1.2, (6, 1, 3)) + rng.normal(0, 0.02, (6,) + points.shape)).astype(np.float32)
+    neutral = difference_lengths(points, nb)
+    assert np.array_equal(stretch_features(frames[:, used], compact, neutral, backend=backend),
+                          stretch_features(frames, nb, neutral, backend=backend))
+
+
 def opencl_or_skip():
     reason = runtime.unavailable_reason()
     if reason is not None:
