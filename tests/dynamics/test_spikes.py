@@ -47,3 +47,23 @@ def test_pops_and_dropped_frames_are_replaced_by_their_neighbours(take, noise):
     near = spiked_anywhere.any(axis=1)
     near = near | np.roll(near, 1) | np.roll(near, -1)
     assert not replaced[~near].any()  # nothing away from the frames the tracker spoilt
+
+
+def test_the_threshold_by_counting_is_the_median_filters_threshold():
+    """A distance is a spike candidate when over SPIKE_FACTOR times the median of its mirrored
+    window (and the floor): the counting test gives exactly the median filter's answer, on
+    takes from 5 frames on, quiet ones (most under the floor) and loud ones (none under it)."""
+    from scipy.ndimage import median_filter
+
+    from facedyn.dynamics import spikes
+
+    rng = np.random.default_rng(2)
+    for frames, scale in ((5, 0.01), (9, 0.03), (40, 0.003), (300, 0.004), (300, 0.05)):
+        distance = np.abs(rng.normal(size=(frames, 60))) * scale
+        distance[rng.random(distance.shape) < 0.03] += 0.3
+        distance[[0, -1]] = 0.0
+        inner = np.concatenate([distance[2:3], distance[1:-1], distance[-3:-2]])
+        typical = median_filter(inner, size=(2 * spikes.LOCAL_FRAMES + 1, 1), mode="mirror")
+        expected = distance > np.maximum(spikes.SPIKE_FACTOR * typical, spikes.FLOOR_CM)
+        assert expected.any()
+        np.testing.assert_array_equal(spikes._over_threshold(distance), expected)
