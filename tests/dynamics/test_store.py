@@ -135,7 +135,7 @@ def test_training_batches_draw_each_pair_once_and_split_equals_concatenated():
     assert half == frames * round(0.5 * samples)
 
 
-@pytest.mark.slow  # trains F for 20 epochs three times
+@pytest.mark.slow  # trains F for 20 epochs twice, then 2 epochs twice
 def test_streamed_training_matches_training_in_memory(corpus, tmp_path):
     """One resident chunk is the in-memory trainer; chunks of 1 MB shuffle by blocks and
     land within a few percent of it, with identical normalization."""
@@ -153,9 +153,11 @@ def test_streamed_training_matches_training_in_memory(corpus, tmp_path):
     assert a["rms_cm"] < 0.1 * a["zero_offset_rms_cm"] and b["rms_cm"] < 0.1 * b["zero_offset_rms_cm"], (a, b)
     assert b["rms_cm"] == pytest.approx(a["rms_cm"], rel=0.15)  # measured: 3% apart
     assert list(tmp_path.iterdir()) == []  # the stores are gone
-    again = train_removal(takes, face, TrainConfig(epochs=20, batch_size=1000, validation=("platform_3",), seed=0, resident_bytes=1 << 20))
-    for p, q in zip(streamed.network.parameters(), again.network.parameters()):
-        torch.testing.assert_close(p, q, rtol=0, atol=0)  # streamed training is seeded too
+    # streamed training is seeded too: two epochs already cover the initial weights and each epoch's block shuffle
+    once, again = (train_removal(takes, face, TrainConfig(epochs=2, batch_size=1000, validation=("platform_3",), seed=0, resident_bytes=1 << 20))
+                   for _ in range(2))
+    for p, q in zip(once.network.parameters(), again.network.parameters()):
+        torch.testing.assert_close(p, q, rtol=0, atol=0)
 
 
 def test_a_take_generator_is_read_one_take_at_a_time(corpus):
