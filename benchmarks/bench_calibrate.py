@@ -9,8 +9,8 @@ The session is calibrate_session.py's (made in --session when it is not there ye
 
 One record per run: the wall seconds, each stage's (calibration.json's), the peak resident
 memory of the whole process tree (calibrate and its corpus workers, sampled every 0.5 s)
-and of its largest process, the corpus's takes written and failed, F's probe and epochs
-(planned, trained, its measured pairs a second), the response's ridge, the candidates'
+and of its largest process, the corpus's takes written and failed, F's minutes and epochs
+(the most allowed, trained, its measured pairs a second), the response's ridge, the candidates'
 figures and the chosen removal, and the machine's load at the start and the end. Figures
 are only worth quoting from an idle machine (say what else ran with --note).
 
