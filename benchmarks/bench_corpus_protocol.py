@@ -34,8 +34,9 @@ def main() -> None:
     args.add_argument("--jobs", type=int, default=2)
     args.add_argument("--data", type=Path, default=DATA)
     args.add_argument("--only", default="", help="only takes whose name matches this glob pattern (simulate --only)")
+    args.add_argument("--resume", action="store_true", help="keep --work: an interrupted corpus resumes (the wall time is this run's alone)")
     args = args.parse_args()
-    if args.work.exists():
+    if args.work.exists() and not args.resume:
         shutil.rmtree(args.work)
     command = [sys.executable, "-m", "facedyn.cli", "simulate", "--scale", "standard", "--randomize-tissue", "take",
                "--extra-motions", "true", "--impacts", "true", "--noise", "0.01", "--data", str(args.data), "-o", str(args.work),
@@ -49,8 +50,9 @@ def main() -> None:
         takes = index.get("takes", [])
         record({"case": f"the recommended corpus with Live Link performances on {args.rig.name if args.rig else 'the built-in face'}",
                 "rig": str(args.rig) if args.rig else "built-in face", "only": args.only, "points": index.get("points"),
-                "jobs": args.jobs, "cpu_count": os.cpu_count(), **measured,
+                "jobs": args.jobs, "cpu_count": os.cpu_count(), "resumed": args.resume, **measured,
                 "takes_written": len(takes), "takes_failed": len(index.get("failed", [])), "failed": index.get("failed", []),
+                "takes_resumed": index.get("resumed"),
                 "livelink_takes": sum("livelink-face" in str(take["spec"].get("dialog") or "") for take in takes), "frames": index.get("frames"),
                 "load_start": load_start, "load_end": load()})
 

@@ -38,6 +38,9 @@ SECTIONS = (
     ("bench_stabilize_speed", "Stabilization speed", "Mode pursuit beside the PyTorch reference solver in the same run."),
     ("bench_remove_speed", "Removal speed", "Removal on an ICT-sized mesh, kernels and the whole processor."),
     ("bench_synthesize_speed", "Synthesis speed", "Synthesis on an ICT-sized mesh."),
+    ("bench_command_io", "remove and synthesize as commands",
+     "The whole command on the ICT rig, 1,000 frames, start-up and USD read and write included, beside its steps timed in "
+     "one process (issue 40: >= 1,000 frames/s)."),
     ("bench_long_take", "Long takes", "Each step as its own usdfacedyn process on long takes: time and peak memory."),
     ("bench_import", "Import memory", "Streaming import of long USD caches and OBJ sequences."),
     ("bench_import_skel", "UsdSkel import memory", "A UsdSkel rig's skinning baked one chunk at a time."),
