@@ -160,7 +160,7 @@ class CalibrateProcessor(Processor):
         write_atomically(out / "calibration.json", lambda handle: handle.write(text))
         return FolderOutput({"chosen": chosen, "removal": str(removal), "synthesis": str(out / "synthesis.response"),
                              **{f"{name}_session_motion_left": figures[name]["session_motion_left"] for name in CANDIDATES},
-                             "epochs": budget["epochs"], "subsample": budget["subsample"], "pairs_per_second": family["pairs_per_second"],
+                             "epochs": family["epochs"], "subsample": budget["subsample"], "pairs_per_second": family["pairs_per_second"],
                              "calibration": str(out / "calibration.json")})
 
     def describe(self, report: dict) -> str:
