@@ -131,9 +131,12 @@ def test_import_records_the_actor_and_stabilize_and_the_trainers_use_it(rig_and_
         assert np.median(error) < 0.01, np.median(error)
         roots.append(root)
     # The model takes the actor's samples and landmarks whichever take comes first, and records the actor and its frame.
-    for order, model_path in ((roots, tmp_path / "a.removal"), (roots[::-1], tmp_path / "b.removal")):
-        assert cli("train-removal", *order, "-o", model_path, "--epochs", "1", "--validation", "walk") == 0
+    # (the second with a budget its reading of the takes already spent: one of its 3 epochs)
+    for order, model_path, flags in ((roots, tmp_path / "a.removal", ("--epochs", "1")),
+                                     (roots[::-1], tmp_path / "b.removal", ("--epochs", "3", "--budget-minutes", "1e-6"))):
+        assert cli("train-removal", *order, "-o", model_path, *flags, "--validation", "walk") == 0
     a, b = load_model(tmp_path / "a.removal"), load_model(tmp_path / "b.removal")
+    assert len(b.info["loss_curve"]) == 1 and b.info["training"]["config"]["time_limit_s"] == pytest.approx(6e-5)
     assert a.info["actor"] == "ada" and a.info["skull_frame"] == actor.skull_frame
     np.testing.assert_array_equal(a.face.samples, actor.skin_samples)
     np.testing.assert_array_equal(b.face.samples, a.face.samples)

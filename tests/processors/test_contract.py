@@ -41,6 +41,8 @@ def test_every_built_in_command_is_a_declared_processor():
     (["train-removal", "c", "-o", "m", "--samples", "0"], "--samples"),
     (["train-removal", "c", "-o", "m", "--device", "bogus"], "--device"),
     (["train-removal", "c", "-o", "m", "--seed", "-1"], "--seed"),
+    (["train-removal", "c", "-o", "m", "--budget-minutes", "0"], "--budget-minutes"),
+    (["train-removal", "c", "-o", "m", "--budget-minutes", "nan"], "--budget-minutes"),
     (["train-synthesis", "c", "-o", "m", "--quasistatic", "truth", "--epochs", "0"], "--epochs"),
     (["train-synthesis", "c", "-o", "m"], "--quasistatic"),
     (["simulate", "-o", "c", "--actor-seed", "-1"], "--actor-seed"),
