@@ -26,6 +26,8 @@ PAGE = ROOT / "docs" / "results.md"
 # named here follow in alphabetical order under their own name.
 SECTIONS = (
     ("demo", "The demo", "The end-to-end demo on the built-in face, scored against the simulator's truth."),
+    ("bench_demo", "The demo's time and disk", "The README's first command as a user runs it: wall time, peak memory and what "
+     "it leaves on disk (issue 40: <= 90 s, <= 300 MB)."),
     ("bench_cross_sim", "Removal, synthesis and retargeting on another tissue model",
      "Training on facedyn's spring-membrane simulator, testing on a hyperelastic finite-element layer (another family) "
      "with per-actor parameters, plain captures with a tracker's errors, through import, stabilize --actor, remove, "
