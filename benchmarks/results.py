@@ -47,6 +47,9 @@ SECTIONS = (
     ("bench_import", "Import memory", "Streaming import of long USD caches and OBJ sequences."),
     ("bench_import_skel", "UsdSkel import memory", "A UsdSkel rig's skinning baked one chunk at a time."),
     ("bench_train_memory", "Training memory", "Training through the on-disk feature store."),
+    ("bench_train_epoch", "F's epoch on a standard corpus",
+     "F with calibrate's flags on the 141-take standard corpus of a 2.7k-point rig: seconds an epoch, peak memory and the "
+     "validation loss per epoch (issue 40: <= 25 s an epoch at <= 4 GB)."),
     ("bench_startup", "Start-up", "How long usdfacedyn takes to answer what needs no work, and `inspect MODEL` (issue 40: <= 0.3 s and <= 0.5 s)."),
     ("bench_model_load_memory", "Model load memory",
      "The peak of loading a model file beside the arrays it declares; the libraries' one-time first use kept apart."),
