@@ -40,7 +40,7 @@ from pathlib import Path
 from facedyn.errors import UsageError
 from facedyn.io.files import write_atomically
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.budget import EpochClock
+from facedyn.processors.epoch_clock import EpochClock
 from facedyn.progress import Progress
 
 BUDGET_MINUTES = 45.0  # the whole command's, by default: the target for a 70-take session of a 2.7k-point rig on 2 cores

@@ -1,10 +1,10 @@
 """calibrate's budget for F: its share of the minutes the corpus left, and the clock of its
-epochs (facedyn.processors.budget); no training."""
+epochs (facedyn.processors.epoch_clock); no training."""
 import io
 
 import pytest
 
-from facedyn.processors.budget import EpochClock
+from facedyn.processors.epoch_clock import EpochClock
 from facedyn.processors.calibrate import F_SAMPLES, F_SHARE, MAX_EPOCHS, training_budget
 from facedyn.progress import Progress
 

@@ -1,4 +1,4 @@
-"""The clock of F's epochs in `usdfacedyn calibrate`: what its budget bought, measured.
+"""The clock of F's epochs in `usdfacedyn calibrate`: what its time budget bought, measured.
 
 How fast F trains depends on the machine, its load, torch's threads and the corpus, so no
 constant turns minutes into epochs: calibrate gives train-removal minutes
@@ -42,7 +42,7 @@ class EpochClock(Progress):
         self.inner.finish()
 
     def epoch_seconds(self) -> list[float]:
-        """Each timed epoch's seconds, the first from the task's start (it includes building the feature store)."""
+        """Each timed epoch's seconds, the first from the task's start (it includes reading the takes into the feature store)."""
         if self.started is None:
             return []
         marks = [self.started] + self.ends
