@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from facedyn.dynamics.bands import BandWeights
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.features import compute_features
 from facedyn.dynamics.modelfile import DynamicsModel
@@ -45,7 +46,6 @@ from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.geometry import quaternion
 from facedyn.kernels import runtime
 from facedyn.performance import Topology
-from facedyn.processors.model_steps import mean_removal
 
 ROWS, COLS, FPS, SAMPLES = 148, 76, 120.0, 344
 ICT_RIG = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"
@@ -212,8 +212,9 @@ def main() -> None:
     response = linear_response(face, skull_points, translate, orient)
     fit_s = time.perf_counter() - start
     alone = best_of(lambda: remove_with_response(skull_points, translate, orient, FPS, response, device="cpu"), args.repeats)
-    blended = best_of(lambda: mean_removal([remove_dynamics(skull_points, translate, orient, FPS, model, "auto"),
-                                            remove_with_response(skull_points, translate, orient, FPS, response, device="cpu")]), args.repeats)
+    blended = best_of(lambda: BandWeights.mean(2).combine([remove_dynamics(skull_points, translate, orient, FPS, model, "auto"),
+                                                           remove_with_response(skull_points, translate, orient, FPS, response,
+                                                                                device="cpu")], FPS), args.repeats)
     emit({"case": "removal_linear_response", "mesh": mesh_name, "points": len(points), "samples": SAMPLES, "frames": args.frames,
           "seconds": alone, "frames_per_s": args.frames / alone, "blend_with_f_seconds": blended, "blend_with_f_frames_per_s": args.frames / blended,
           "target_frames_per_s": 300, "one_off_fit_s": fit_s, "temporal_kernels": response.info["calibration"]["temporal_kernels"]})

@@ -144,8 +144,10 @@ class SessionScore:
         self.motion = BeyondSag()
         self.left = {name: BeyondSag() for name in removals}
 
-    def add(self, captured: np.ndarray, orient: np.ndarray, offsets: dict) -> None:
-        """One take: its captured skull-space points (F, N, 3), skull orient (F, 4) and each removal's offsets (F, N, 3)."""
+    def add(self, captured: np.ndarray, orient: np.ndarray, offsets: dict) -> tuple[np.ndarray, np.ndarray]:
+        """One take: its captured skull-space points (F, N, 3), skull orient (F, 4) and each removal's offsets (F, N, 3).
+        Returns what the removals were scored against: the cleaned capture (rows, D) after the skipped
+        frames, over the face's vertices, and the skull's rotations (rows, 9)."""
         from facedyn.dynamics.spikes import replace_spikes
         from facedyn.geometry import quaternion
 
@@ -158,6 +160,7 @@ class SessionScore:
         self.motion.add(cleaned, rotations)
         for name, removed in offsets.items():
             self.left[name].add(cleaned - np.asarray(removed)[self.skip:, self.vertices].reshape(rows, -1), rotations)
+        return cleaned, rotations
 
     def motion_left(self) -> dict:
         """{removal: the fraction of the session's motion beyond held shapes and sag it leaves}."""

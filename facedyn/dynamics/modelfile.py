@@ -39,7 +39,9 @@ does not fit. Response files written before the kind existed say "synthesis" wit
 
 A blend (kind "blend", `save_blend`) holds whole models in one file, each member's metadata
 under `members` and its arrays under `member<i>/`: what `remove --model` takes to remove
-the mean of their dynamics, as `--blend` does; `load_models` reads it (and any one model).
+the mean of their dynamics, as `--blend` does, or with `bands` their dynamics weighted per
+frequency band (facedyn.dynamics.bands.BandWeights, as `calibrate` chooses them);
+`load_models` reads it (and any one model).
 """
 from __future__ import annotations
 
@@ -63,6 +65,7 @@ from facedyn.io.files import open_regular, write_atomically
 from facedyn.performance import Topology
 
 if TYPE_CHECKING:
+    from facedyn.dynamics.bands import BandWeights
     from facedyn.dynamics.network import Network
 
 MAGIC = b"FDYNMDL1"
@@ -176,14 +179,19 @@ def save_model(model: DynamicsModel, path) -> Path:
     return _write(Path(path), metadata, arrays)
 
 
-def save_blend(models: list, path) -> Path:
+def save_blend(models: list, path, weights=None) -> Path:
     """Write a blend of models (each a removal model or a linear response, one mesh and frame
-    rate) to ``path`` atomically: one file that removes the mean of their dynamics."""
+    rate) to ``path`` atomically: one file that removes the mean of their dynamics, or with
+    `weights` (a BandWeights of as many members) their dynamics weighted per frequency band."""
     if len(models) < 2 or any(m.kind not in ("removal", "response") for m in models):
         raise ValueError(f"a blend holds two or more removal models or linear responses, got {[m.kind for m in models]}")
+    if weights is not None and weights.members != len(models):
+        raise ValueError(f"band weights of {weights.members} members for a blend of {len(models)}")
     for other in models[1:]:
         models[0].check_compatible(other.fingerprint, other.fps)
     metadata = {"format": "facedyn-model", "version": FORMAT_VERSION, "kind": BLEND, "members": []}
+    if weights is not None and not weights.is_mean():
+        metadata["bands"] = weights.to_json()
     arrays = {}
     for i, model in enumerate(models):
         member, member_arrays = _contents(model)
@@ -401,14 +409,34 @@ def load_model(path, *, topology: Topology | str | None = None, fps: float | Non
     return model
 
 
-def load_models(path, *, topology: Topology | str | None = None, fps: float | None = None) -> list[DynamicsModel]:
-    """[the model] of a model file, or a blend's members (each checked like a model)."""
+def load_models(path, *, topology: Topology | str | None = None, fps: float | None = None) -> tuple[list[DynamicsModel], BandWeights]:
+    """([the model], its weight 1) of a model file, or a blend's members (each checked like a
+    model) and how the blend weighs their removals (facedyn.dynamics.bands.BandWeights: the
+    mean unless the blend declares bands)."""
     path = Path(path)
     stored = _read(path)
-    models = [_build(path, stored)] if stored.metadata.get("kind") != BLEND else [_build(path, member) for member in _members(path, stored)]
+    if stored.metadata.get("kind") != BLEND:
+        models = [_build(path, stored)]
+    else:
+        models = [_build(path, member) for member in _members(path, stored)]
     for model in models:
         model.check_compatible(topology, fps)
-    return models
+    return models, _blend_weights(path, stored, len(models))
+
+
+def _blend_weights(path: Path, stored: _Stored, members: int) -> BandWeights:
+    """A blend's declared band weights, checked (the mean when it declares none; weight 1 for one model)."""
+    from facedyn.dynamics.bands import BandWeights
+
+    if "bands" not in stored.metadata or stored.metadata.get("kind") != BLEND:
+        return BandWeights.mean(members)
+    try:
+        weights = BandWeights.from_json(stored.metadata["bands"])
+    except ValueError as error:
+        raise ModelFileError(f"{path}: its band weights are not valid: {error}") from None
+    if weights.members != members:
+        raise ModelFileError(f"{path}: band weights for {weights.members} members in a blend of {members}")
+    return weights
 
 
 def _members(path: Path, stored: _Stored) -> list[_Stored]:
@@ -684,8 +712,11 @@ def describe_model(path) -> dict:
     stored = _read(path)
     if stored.metadata.get("kind") == BLEND:
         members = [_describe(path, member) for member in _members(path, stored)]
+        weights = _blend_weights(path, stored, len(members))
+        how = "the mean of " if weights.is_mean() else f"per frequency band (edges {', '.join(f'{e:g}' for e in weights.edges_hz)} Hz) a weighing of "
         return {"path": str(path), "format_version": stored.metadata["version"], "kind": BLEND,
-                "network": "the mean of " + " and ".join(m["network"] for m in members), "members": members,
+                "network": how + " and ".join(m["network"] for m in members), "members": members,
+                **({} if weights.is_mean() else {"bands": weights.to_json()}),
                 "checksum": stored.checksums, "bytes": stored.size}
     return {"path": str(path), **_describe(path, stored), "checksum": stored.checksums, "bytes": stored.size}
 

@@ -14,12 +14,16 @@ The README's workflow for a real actor, as one resumable run within a stated bud
 3. `synthesis.response`: the actor's linear response fitted on the session, its ridge
    chosen there (facedyn.dynamics.response), with F's samples and landmarks;
 4. the removal chosen without truth: each candidate (the family's F, the response, the mean
-   of the two) scored on the session by `evaluate --session`'s figure, the fraction of the
-   held takes' motion it leaves (the response's own takes each removed by the response
-   refitted without it, so its figure is a new capture's), all three in one pass over the
-   session (each take read and cleaned of tracker spikes once); the least-leaving is written as
-   `removal.removal`, `removal.response` or `removal.blend` (a blend file holding both
-   models), which `remove --model` takes;
+   of the two, and the two weighed per frequency band) scored on the session by `evaluate
+   --session`'s figure, the fraction of the held takes' motion it leaves (the response's own
+   takes each removed by the response refitted without it, so its figure is a new
+   capture's), all in one pass over the session (each take read and cleaned of tracker
+   spikes once). The band weights are the ones that leave the least (a weight per octave band
+   for F, the rest the response's: facedyn.dynamics.bands), so that candidate leaves at most
+   what the other three do on the session and differs from them as far as the session
+   says the two models are better at different frequencies. The least-leaving is written
+   as `removal.removal`, `removal.response` or `removal.blend` (a blend file holding both
+   models and, for the bands, their weights), which `remove --model` takes;
 5. `calibration.json`: every candidate's figure, the choice, the budget (F's minutes, the
    epochs trained with their measured seconds and pairs a second) and the time each stage took.
 
@@ -46,7 +50,7 @@ from facedyn.progress import Progress
 BUDGET_MINUTES = 45.0  # the whole command's, by default: the issue's target for a 70-take session of a 2.7k-point rig on 2 cores
 F_SHARE = 0.75  # of the minutes the corpus leaves, F's training takes this share; the response and the scores the rest
 MAX_EPOCHS = 250  # the paper's
-CANDIDATES = ("family", "response", "mean")  # the removals scored, in the order a tie keeps
+CANDIDATES = ("family", "response", "mean", "bands")  # the removals scored, in the order a tie keeps
 NOISE_CM = 0.01  # the recommended corpus's tracking noise
 F_SAMPLES = 344  # F's skin samples (train-removal's default): the pairs per corpus frame
 
@@ -119,6 +123,7 @@ class CalibrateProcessor(Processor):
         return Plan(description, (request, roots, rig, specs))
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
+        from facedyn.dynamics.bands import EDGES_HZ
         from facedyn.io.files import sha256_of_file
         from facedyn.processors.stages import Stages, file_state, key_of
 
@@ -143,15 +148,15 @@ class CalibrateProcessor(Processor):
         response_key = key_of("response", family_key, session, params["ridge"], params["settle"])
         response = stages.run("response", response_key, [out / "synthesis.response"],
                               lambda: fit_response(roots, out / "family.removal", out / "synthesis.response", params, progress))
-        models = {"family": (out / "family.removal", None), "response": (out / "synthesis.response", None),
-                  "mean": (out / "family.removal", out / "synthesis.response")}
-        scores_key = key_of("scores", family_key, response_key, session, params["skip"])
+        both = (out / "family.removal", out / "synthesis.response")
+        models = {"family": (out / "family.removal",), "response": (out / "synthesis.response",), "mean": both, "bands": both}
+        scores_key = key_of("scores", family_key, response_key, session, params["skip"], EDGES_HZ)
         figures = stages.run("scores", scores_key, [], lambda: score_candidates(roots, out / "family.removal", out / "synthesis.response",
                                                                                 params, progress))
         chosen = min(CANDIDATES, key=lambda name: figures[name]["session_motion_left"])
-        removal = write_removal(out, chosen)
+        removal = write_removal(out, chosen, figures["bands"]["weights"])
         record = {"chosen": chosen, "removal": removal.name, "synthesis": "synthesis.response",
-                  "candidates": {name: {"models": [str(p.name) for p in models[name] if p is not None], **figures[name]}
+                  "candidates": {name: {"models": [p.name for p in models[name]], **figures[name]}
                                  for name in CANDIDATES},
                   "response": response, "budget": {**budget, "budget_minutes": params["budget_minutes"]}, "family": family,
                   "stage_seconds": stages.seconds(), "rig": str(params["rig"]), "session": [str(r) for r in roots],
@@ -273,22 +278,27 @@ def score_candidates(roots: list, family: Path, response: Path, params: dict, pr
         for perf, (_, by_response) in zip(takes, left_out):
             _, by_family = removal_of(perf.points, *perf.skull(), perf.fps, f)
             yield perf, {"family": by_family, "response": by_response,
-                         "mean": np.mean([by_family, by_response], axis=0).astype(np.float32)}  # as model_steps.mean_removal
+                         "mean": np.mean([by_family, by_response], axis=0).astype(np.float32)}  # as BandWeights.mean(2) blends them
             progress.advance()
 
     progress.start(f"score {', '.join(CANDIDATES)} on the session ({len(takes)} takes)", len(takes))
-    figures = session_motion_left(removals(), CANDIDATES, params["skip"])
+    figures = session_motion_left(removals(), ("family", "response", "mean"), params["skip"], band_pair=("family", "response"))
     progress.finish()
-    return {name: {"session_motion_left": figures[name]} for name in CANDIDATES}
+    return {**{name: {"session_motion_left": figures[name]} for name in CANDIDATES},
+            "bands": {"session_motion_left": figures["bands"], "weights": figures["band_weights"].to_json()}}
 
 
-def write_removal(out: Path, chosen: str) -> Path:
-    """The chosen removal as one model file `removal.<suffix>` that `remove --model` takes; any
-    other removal.* a run before chose is removed (after the new one is in place)."""
+def write_removal(out: Path, chosen: str, band_weights: dict) -> Path:
+    """The chosen removal as one model file `removal.<suffix>` that `remove --model` takes (the
+    bands: a blend with `band_weights`, facedyn.dynamics.bands.BandWeights' record); any other
+    removal.* a run before chose is removed (after the new one is in place)."""
+    from facedyn.dynamics.bands import BandWeights
     from facedyn.dynamics.modelfile import SUFFIXES, load_model, save_blend
 
-    if chosen == "mean":
-        path = save_blend([load_model(out / "family.removal"), load_model(out / "synthesis.response")], out / f"removal{SUFFIXES['blend']}")
+    if chosen in ("mean", "bands"):
+        weights = BandWeights.from_json(band_weights) if chosen == "bands" else None
+        path = save_blend([load_model(out / "family.removal"), load_model(out / "synthesis.response")], out / f"removal{SUFFIXES['blend']}",
+                          weights)
     else:
         source = out / ("family.removal" if chosen == "family" else "synthesis.response")
         data = source.read_bytes()

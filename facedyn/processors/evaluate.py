@@ -30,8 +30,7 @@ import numpy as np
 from facedyn.errors import UsageError
 from facedyn.performance import QUASISTATIC, SYNTHESIZED
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
-from facedyn.processors.model_steps import (SYNTHESIZES, check_skull_frame, mean_removal, removal_models, removal_of,
-                                            session_motion_left)
+from facedyn.processors.model_steps import SYNTHESIZES, check_skull_frame, removal_blend, removal_of, session_motion_left
 from facedyn.progress import Progress
 
 QUASISTATIC_BELOW = SYNTHESIZED  # evaluate reads what remove wrote: everything below the synthesized role
@@ -71,14 +70,13 @@ class EvaluateProcessor(Processor):
         if params["blend"] is not None and params["removal"] is None:
             raise UsageError("--blend MODEL averages with --removal MODEL's removal; give --removal too")
         takes = []
-        removals = []
+        removals, weights = [], None
         reads = QUASISTATIC_BELOW if params["removal"] is None else REMOVAL_READS
         for path in request.inputs:
             check_length(path, reads, request.frames)
             perf, _ = read_take_below(path, reads, frames=request.frames)
             if params["removal"] is not None and not removals:
-                removals = [(params[flag], model) for flag in ("removal", "blend") if params[flag] is not None
-                            for model in removal_models(params[flag], flag, perf, perf.fps, path)]
+                removals, weights = removal_blend(params["removal"], params["blend"], perf, perf.fps, path)
             elif params["removal"] is not None:
                 for model_path, model in removals:
                     check_skull_frame(path, perf, model_path, model)
@@ -98,12 +96,12 @@ class EvaluateProcessor(Processor):
         description = {"takes": [str(p) for p, _ in takes], "frames": [p.frame_count for _, p in takes],
                        "held_expression": params["held_expression"], "session": params["session"], "synthesis": str(params["synthesis"] or ""),
                        "removal": str(params["removal"] or "the takes' own"), "blend": str(params["blend"] or "")}
-        return Plan(description, (request, takes, synthesis, removals))
+        return Plan(description, (request, takes, synthesis, removals, weights))
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
-        request, read, synthesis, removals = plan.state
+        request, read, synthesis, removals, weights = plan.state
         params = request.params
-        removed = removed_by(read, removals) if removals else read
+        removed = removed_by(read, removals, weights) if removals else read
         progress.start("evaluate takes", len(read))
         takes, per_take = [], []
         for path, perf in removed:
@@ -155,14 +153,15 @@ def check_response_takes(path: Path, model, takes: list) -> None:
                          f"{' with --frames' if given.keys() == fitted.keys() else ''}")
 
 
-def removed_by(read: list, models: list) -> list:
-    """The stabilized takes as `remove` with the models (averaged, as --blend) would leave
-    them: quasistatic points and the removed offsets; a linear response's own calibration
-    takes are each removed by the response refitted without them."""
+def removed_by(read: list, models: list, weights) -> list:
+    """The stabilized takes as `remove` with the models (blended by `weights`, a
+    facedyn.dynamics.bands.BandWeights) would leave them: quasistatic points and the removed
+    offsets; a linear response's own calibration takes are each removed by the response
+    refitted without them."""
     outputs = [_removals(read, model) for model in models]
     removed = []
     for k, (path, perf) in enumerate(read):
-        quasistatic, offsets = mean_removal([output[k] for output in outputs])
+        quasistatic, offsets = weights.combine([output[k] for output in outputs], perf.fps)
         removed.append((path, replace(perf, points=quasistatic, offsets=offsets)))
     return removed
 

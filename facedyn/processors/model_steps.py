@@ -21,10 +21,10 @@ REMOVES = ("removal", "response")  # the model kinds that remove: network F, an 
 SYNTHESIZES = ("synthesis", "response")  # the model kinds that synthesize: network H, an actor's linear response
 
 
-def model_windows(reader, *models):
+def model_windows(reader, *models, reach: int = 0):
     """The reader's chunks of CHUNK_FRAMES output frames, each with the context the models' windows reach (none
-    without a model; a None model is none)."""
-    return reader.windows(CHUNK_FRAMES, max((context_frames(model) for model in models if model is not None), default=0))
+    without a model; a None model is none), plus `reach` frames (what a blend's band filters read of their results)."""
+    return reader.windows(CHUNK_FRAMES, max((context_frames(model) for model in models if model is not None), default=0) + reach)
 
 
 def take_reader(request: Request, role_name: str):
@@ -46,21 +46,38 @@ def reader_with_model(request: Request, role_name: str, *kinds: str):
     return reader, model
 
 
-def removal_models(path: Path, flag: str, perf, fps: float, take: Path) -> list:
+def removal_models(path: Path, flag: str, perf, fps: float, take: Path) -> tuple[list, object]:
     """The models a removal file holds (one, or a blend's members) that fit the take: removal
-    models (F) and linear responses, never a synthesis network."""
+    models (F) and linear responses, never a synthesis network; and how their removals blend
+    (facedyn.dynamics.bands.BandWeights)."""
     from facedyn.dynamics.modelfile import load_models
     from facedyn.dynamics.portable import for_take, is_portable
     from facedyn.models import resolve_model
 
     path = resolve_model(path, flag)
-    models = load_models(path, topology=perf.topology, fps=fps)
+    models, weights = load_models(path, topology=perf.topology, fps=fps)
     for model in models:
         if model.kind not in REMOVES:
             raise UsageError(f"--{flag} {path}: a synthesis model (network H), which reads the quasistatic shape it would "
                              "make; this needs a removal model (F), an actor's linear response (.response) or a blend of them")
         check_skull_frame(take, perf, path, model)
-    return [for_take(model, perf) if is_portable(model) else model for model in models]
+    return [for_take(model, perf) if is_portable(model) else model for model in models], weights
+
+
+def removal_blend(model: Path, blend: Path | None, perf, fps: float, take: Path) -> tuple[list, object]:
+    """[(file, model)]: --model's models, and --blend's, whose removals are averaged with them; and how
+    their removals blend (facedyn.dynamics.bands.BandWeights): the file's own weights, or with --blend the mean."""
+    from facedyn.dynamics.bands import BandWeights
+
+    models, weights = removal_models(model, "model", perf, fps, take)
+    if blend is None:
+        return [(model, m) for m in models], weights
+    more, more_weights = removal_models(blend, "blend", perf, fps, take)
+    for path, held in ((model, weights), (blend, more_weights)):
+        if not held.is_mean():
+            raise UsageError(f"--blend {blend}: --blend averages removals, and {path} weighs its members per frequency band; "
+                             "give that blend alone, as --model")
+    return [(model, m) for m in models] + [(blend, m) for m in more], BandWeights.mean(len(models) + len(more))
 
 
 def check_skull_frame(path: Path, perf, model_path: Path, model) -> None:
@@ -89,14 +106,7 @@ def removal_of(points, translate, orient, fps: float, model, backend: str = "aut
     return remove_with_response(points, translate, orient, fps, model, device=device)
 
 
-def mean_removal(removed: list) -> tuple[np.ndarray, np.ndarray]:
-    """(quasistatic points, offsets), float32: the mean of one take's removals by several models (--blend)."""
-    if len(removed) == 1:
-        return removed[0]
-    return tuple(np.mean([r[i] for r in removed], axis=0).astype(np.float32) for i in (0, 1))
-
-
-def session_motion_left(takes, names: tuple[str, ...], skip_s: float) -> dict:
+def session_motion_left(takes, names: tuple[str, ...], skip_s: float, band_pair: tuple[str, str] | None = None) -> dict:
     """{removal: the fraction of a calibration session's motion it leaves beyond held shapes
     and sag}, `evaluate --session`'s figure (facedyn.dynamics.diagnostics.SessionScore).
 
@@ -104,10 +114,14 @@ def session_motion_left(takes, names: tuple[str, ...], skip_s: float) -> dict:
     generator keeps one take's removals in memory); the Performance's points (plus the
     offsets it holds, when its removal was read from its layers) are the capture. Every
     removal is scored in the same pass, each take's capture cleaned of tracker spikes once.
+    With band_pair (a, b), two of the removals, also "bands": the figure of their blend
+    with the per-band weights that leave the least (facedyn.dynamics.bands.BandWeightsFit),
+    and "band_weights", that blend (a BandWeights of members a, b).
     """
+    from facedyn.dynamics.bands import BandWeightsFit
     from facedyn.dynamics.diagnostics import SessionScore
 
-    score = None
+    score, fit = None, None if band_pair is None else BandWeightsFit()
     for perf, offsets in takes:
         skip = int(round(skip_s * perf.fps))
         if perf.frame_count <= skip + 2:
@@ -116,10 +130,18 @@ def session_motion_left(takes, names: tuple[str, ...], skip_s: float) -> dict:
             vertices = np.arange(perf.point_count) if perf.face_vertices is None else np.asarray(perf.face_vertices)
             score = SessionScore(vertices, skip, names)
         captured = perf.points if perf.offsets is None else perf.points + perf.offsets
-        score.add(captured, perf.skull()[1], offsets)
+        cleaned, rotations = score.add(captured, perf.skull()[1], offsets)
+        if fit is not None:
+            a, b = (np.asarray(offsets[name])[:, score.vertices].reshape(perf.frame_count, -1) for name in band_pair)
+            fit.add(cleaned, rotations, a, b, perf.fps, skip)
     if score is None:
         raise UsageError("a session figure needs at least one take")
-    return {name: round(left, 4) for name, left in score.motion_left().items()}
+    figures = {name: round(left, 4) for name, left in score.motion_left().items()}
+    if fit is not None:
+        weights = fit.weights()
+        figures["bands"] = round(fit.left(weights.weights[:, 0]) / max(score.motion.norm(), 1e-30), 4)
+        figures["band_weights"] = weights
+    return figures
 
 
 def context_frames(model) -> int:

@@ -3,7 +3,8 @@
 Or that an actor's linear response predicts from the skull alone (a .response file from
 `train-synthesis --response linear`, facedyn.dynamics.response): `--model` takes either, or
 a blend file (`usdfacedyn calibrate`'s `removal.blend`), which removes the mean of its
-members' dynamics, as `--blend MODEL` does for two files (F's and the actor's response,
+members' dynamics or weighs them per frequency band as calibrate chose on the actor's session
+(facedyn.dynamics.bands); `--blend MODEL` removes the mean of two files (F's and the actor's response,
 whose errors are partly independent); `usdfacedyn evaluate --session --removal M --blend N`
 scores the mean on the actor's session before a take is touched. A synthesis network H is
 never a removal.
@@ -23,7 +24,7 @@ from pathlib import Path
 
 from facedyn.performance import BACKENDS, QUASISTATIC
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_device
-from facedyn.processors.model_steps import OffsetStats, mean_removal, model_inputs, model_windows, removal_models, removal_of, take_reader
+from facedyn.processors.model_steps import OffsetStats, model_inputs, model_windows, removal_blend, removal_of, take_reader
 from facedyn.progress import Progress
 
 
@@ -46,19 +47,20 @@ class RemoveProcessor(Processor):
     def prepare(self, request: Request) -> Plan:
         params = request.params
         reader = take_reader(request, self.writes.role)
-        models = removal_models(params["model"], "model", reader.head, reader.fps, request.inputs[0])
-        if params["blend"] is not None:
-            models += removal_models(params["blend"], "blend", reader.head, reader.fps, request.inputs[0])
+        removals, weights = removal_blend(params["model"], params["blend"], reader.head, reader.fps, request.inputs[0])
+        models = [model for _, model in removals]
         description = {"take": str(request.inputs[0]), "frames": reader.frame_count, "model": str(params["model"]),
                        "blend": str(params["blend"] or ""), "samples": int(len(models[0].face.samples)),
                        **{f"face_{key}": models[0].info[key] for key in ("rest", "facing") if key in models[0].info}}  # a per-take setup's
-        return Plan(description, (reader, models, params))
+        if not weights.is_mean():
+            description["bands"] = weights.to_json()
+        return Plan(description, (reader, models, weights, params))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
         from facedyn.usd import schema
         from facedyn.usd.layers import LayerContent
 
-        reader, models, params = plan.state
+        reader, models, weights, params = plan.state
         source = reader.source
         layer = LayerContent(frames=reader.time_codes, mesh_path=source.mesh_path, skull_path=source.skull_path,
                              face=schema.FaceAttributes(role=self.writes.role, skin_samples=models[0].face.samples))
@@ -66,10 +68,10 @@ class RemoveProcessor(Processor):
 
         def chunks():
             progress.start("remove dynamics", reader.frame_count)
-            for window in model_windows(reader, *models):
+            for window in model_windows(reader, *models, reach=weights.reach(reader.fps)):
                 removed = [removal_of(window.take.points, *window.take.skull(), reader.fps, model, params["backend"], params["device"])
                            for model in models]
-                quasistatic, offsets = mean_removal(removed)
+                quasistatic, offsets = weights.combine(removed, reader.fps)
                 yield LayerContent(frames=reader.time_codes[window.start:window.stop], points=quasistatic[window.inner],
                                    offsets=stats.add(offsets[window.inner]))
                 progress.advance(window.stop - window.start)

@@ -331,14 +331,21 @@ def test_a_blend_holds_its_members_whole_in_one_checked_file(template, response,
     is no member, and a changed byte is caught by the file's checksums."""
     from facedyn.dynamics.modelfile import ModelFileError, describe_model, load_models, save_blend
 
+    from facedyn.dynamics.bands import BandWeights
+
     path = save_blend([response, response], tmp_path / "removal.blend")
-    members = load_models(path, topology=response.fingerprint, fps=FPS)
-    assert [m.kind for m in members] == ["response", "response"]
+    members, weights = load_models(path, topology=response.fingerprint, fps=FPS)
+    assert [m.kind for m in members] == ["response", "response"] and weights.is_mean()
     for member in members:
         for ours, theirs in zip(member.network.state_dict().values(), response.network.state_dict().values()):
             assert torch.equal(ours, theirs)
         assert member.info["calibration"] == response.info["calibration"]
-    assert [m.kind for m in load_models(save_model(response, tmp_path / "one.response"))] == ["response"]
+    assert [m.kind for m in load_models(save_model(response, tmp_path / "one.response"))[0]] == ["response"]
+    bands = BandWeights((2.0, 4.0), np.array([[0.25, 0.75], [0.5, 0.5], [1.0, 0.0]]))
+    banded = save_blend([response, response], tmp_path / "bands.blend", bands)
+    assert load_models(banded)[1].to_json() == bands.to_json()
+    assert describe_model(banded)["bands"] == bands.to_json() and "per frequency band" in describe_model(banded)["network"]
+    assert "bands" not in describe_model(path) and describe_model(path)["network"].startswith("the mean of")
     with pytest.raises(ModelFileError, match="a blend of 2 removal models"):
         load_model(path)
     assert describe_model(path)["kind"] == "blend" and len(describe_model(path)["members"]) == 2

@@ -6,6 +6,8 @@ import pytest
 import torch
 
 from facedyn.cli import main
+from facedyn.dynamics.bands import BandWeights
+from facedyn.dynamics.modelfile import load_model, save_blend
 from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
 from facedyn.sim.tissue import TissueParams
@@ -48,10 +50,12 @@ def test_calibrate_chooses_the_least_leaving_removal_and_resumes(actor_session, 
     assert cli("calibrate", *roots, "-o", out, *flags) == 0
     record = json.loads((out / "calibration.json").read_text())
     figures = {name: c["session_motion_left"] for name, c in record["candidates"].items()}
-    assert set(figures) == {"family", "response", "mean"} and all(0 < v < 10 for v in figures.values())
+    assert set(figures) == {"family", "response", "mean", "bands"} and all(0 < v < 10 for v in figures.values())
     assert record["chosen"] == min(figures, key=figures.get)
+    assert figures["bands"] <= min(figures["family"], figures["response"], figures["mean"])  # the weights include all three
     removal = out / record["removal"]
-    assert removal.is_file() and removal.name == {"family": "removal.removal", "response": "removal.response", "mean": "removal.blend"}[record["chosen"]]
+    assert removal.is_file() and removal.name == {"family": "removal.removal", "response": "removal.response", "mean": "removal.blend",
+                                                  "bands": "removal.blend"}[record["chosen"]]
     assert sorted(p.name for p in out.glob("removal.*")) == [removal.name]
     assert (out / "synthesis.response").is_file() and (out / "family.removal").is_file()
     assert record["budget"]["epochs"] == 2 and record["budget"]["epochs_given"] and record["budget"]["budget_minutes"] == 45.0
@@ -63,6 +67,14 @@ def test_calibrate_chooses_the_least_leaving_removal_and_resumes(actor_session, 
                "-o", tmp_path / "by_hand") == 0
     by_hand = json.loads((tmp_path / "by_hand" / "report.json").read_text())["session"]["motion_left_beyond_sag"]
     assert by_hand == figures["mean"]
+    # and the band blend's: its weights applied by evaluate (as remove applies them) leave what the fit said
+    bands = save_blend([load_model(out / "family.removal"), load_model(out / "synthesis.response")], tmp_path / "bands.blend",
+                       BandWeights.from_json(record["candidates"]["bands"]["weights"]))
+    assert cli("evaluate", *roots, "--session", "true", "--removal", bands, "-o", tmp_path / "bands_by_hand") == 0
+    by_hand = json.loads((tmp_path / "bands_by_hand" / "report.json").read_text())["session"]["motion_left_beyond_sag"]
+    assert by_hand == pytest.approx(figures["bands"], abs=2e-4)
+    assert cli("remove", roots[1], "--model", bands, "--blend", out / "family.removal", "-o", tmp_path / "refused.usdc") == 2
+    assert "weighs its members per frequency band" in capsys.readouterr().err and not (tmp_path / "refused.usdc").exists()
     # the chosen removal is one file remove takes; a network H would not be
     take = roots[1]
     assert cli("remove", take, "--model", removal, "-o", tmp_path / "quasistatic.usdc") == 0
