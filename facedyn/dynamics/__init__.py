@@ -16,6 +16,7 @@ _PUBLIC = {
     "settled_frames": "response",
     "align_trajectory": "retarget", "delta_transfer": "retarget", "skull_correspondence": "retarget",
     "held_expression_spread": "diagnostics", "motion_left_beyond_sag": "diagnostics",
+    "BandWeights": "bands", "BandWeightsFit": "bands",
     "FaceSetup": "face",
     "default_landmarks": "samples",
     "skull_accelerations": "skull_motion",
