@@ -110,8 +110,8 @@ def testset_records(folder: Path) -> list[dict]:
                              "rest": "given (the actor made from the actor's rig)" if run.get("stabilized") != "without --actor"
                              else "none (the take's own frame and first frame)",
                              "test data": "MuJoCo flex tissue over the actor's own bone (benchmarks/testset)",
-                             "model": (f"{run['removal']} (how it was trained: usdfacedyn inspect {run['removal']})" if run.get("removal")
-                                       else "none: baselines only"),
+                             "model": (f"{run['removal']} ({run.get('note') or 'how it was trained: usdfacedyn inspect ' + run['removal']})"
+                                       if run.get("removal") else "none: baselines only"),
                              "split": run["split"] + (": tuned on" if run["split"] == "validation" else ": run once, never used to choose")},
                 "table": {"columns": list(TESTSET_COLUMNS), "rows": [[take.get(c, "") for c in TESTSET_COLUMNS] for take in run["takes"]]},
             })

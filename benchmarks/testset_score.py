@@ -1,6 +1,7 @@
 """Score removals on a test-set actor's test takes (benchmarks/README-testset.md); one JSON file per run.
 
     .venv/bin/python benchmarks/testset_score.py ACTOR_FOLDER [--removal MODEL [--blend MODEL]] [--work DIR] [--results DIR] [--no-actor]
+        [--note "how MODEL was made"]
 
 Per test take: `usdfacedyn actor rig.usda`, then `import` + `stabilize --actor` of
 tracked.usdc (the console as a user runs it), and the figures (fraction of the true
@@ -46,6 +47,7 @@ def main() -> None:
     parser.add_argument("--blend", type=Path, help="with --removal: remove --blend (a linear response)")
     parser.add_argument("--work", type=Path, help="keep the imported takes here (default: a temporary folder)")
     parser.add_argument("--results", type=Path, default=REPO / "benchmarks" / "results" / "testset")
+    parser.add_argument("--note", default="", help="how the removal model was made (the results page shows it beside the figures)")
     args = parser.parse_args()
     info_path = args.actor / "actor.json"
     if not info_path.is_file():
@@ -57,7 +59,7 @@ def main() -> None:
     run = {"actor": info["actor"]["name"], "split": info["actor"]["split"], "commit": commit(),
            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
            "cpus": os.cpu_count(), "removal": args.removal and str(args.removal), "blend": args.blend and str(args.blend),
-           "stabilized": "without --actor" if args.no_actor else "with --actor", "takes": []}
+           "stabilized": "without --actor" if args.no_actor else "with --actor", **({"note": args.note} if args.note else {}), "takes": []}
     with tempfile.TemporaryDirectory(prefix="facedyn-testset-") as scratch:
         work = args.work or Path(scratch)
         work.mkdir(parents=True, exist_ok=True)
