@@ -36,19 +36,15 @@ def sigma_frames(hz: float, fps: float) -> float:
 
 def lowpass(signal: np.ndarray, hz: float, fps: float) -> np.ndarray:
     """`signal` (F, ...) low-passed along its frames at `hz` (float64); the ends are held (edge padding)."""
+    from scipy.ndimage import correlate1d
+
     x = np.asarray(signal, dtype=np.float64)
     radius = reach_frames(hz, fps)
-    if radius == 0:
+    if radius == 0 or len(x) == 0:
         return x.copy()
     t = np.arange(-radius, radius + 1)
     kernel = np.exp(-0.5 * (t / sigma_frames(hz, fps)) ** 2)
-    kernel /= kernel.sum()
-    padded = np.concatenate([np.repeat(x[:1], radius, axis=0), x, np.repeat(x[-1:], radius, axis=0)])
-    flat = padded.reshape(len(padded), -1)
-    out = np.zeros((len(x), flat.shape[1]))
-    for k, weight in enumerate(kernel):  # a short kernel over many channels: shifted sums beat a convolution per channel
-        out += weight * flat[k:k + len(x)]
-    return out.reshape(x.shape)
+    return correlate1d(x, kernel / kernel.sum(), axis=0, mode="nearest")
 
 
 def reach_frames(hz: float, fps: float) -> int:
@@ -154,15 +150,17 @@ class BandWeightsFit:
         """One take: cleaned (rows, D) its capture after `skip` frames; rotations (rows, 9); a, b the
         two removals' offsets over the whole take (F, D), F = skip + rows (the bands read every frame)."""
         rows = len(cleaned)
-        bands = split(np.asarray(a, dtype=np.float64) - b, self.edges_hz, fps)
-        columns = [np.asarray(cleaned, dtype=np.float64) - np.asarray(b, dtype=np.float64)[skip:]] + [d[skip:] for d in bands]
-        columns = [c.reshape(rows, -1) - c.reshape(rows, -1).mean(0) for c in columns]
+        b = np.asarray(b, dtype=np.float64)
+        columns = np.empty((len(self.edges_hz) + 2, rows, np.shape(cleaned)[1]))
+        columns[0] = cleaned - b[skip:]
+        for k, band in enumerate(split(np.asarray(a, dtype=np.float64) - b, self.edges_hz, fps), start=1):
+            columns[k] = band[skip:]
+        columns -= columns.mean(axis=1, keepdims=True)  # each take centred (its held shape)
         rotation = np.asarray(rotations, dtype=np.float64)
         rotation = rotation - rotation.mean(0)
-        for i, j in itertools.combinations_with_replacement(range(len(columns)), 2):
-            self.gram[i, j] += float(np.einsum("ij,ij->", columns[i], columns[j]))
-            self.gram[j, i] = self.gram[i, j]
-        rc = np.stack([rotation.T @ c for c in columns])
+        flat = columns.reshape(len(columns), -1)
+        self.gram += flat @ flat.T
+        rc = np.matmul(rotation.T, columns)  # (columns, 9, D)
         self.rr += rotation.T @ rotation
         self.rc = rc if self.rc is None else self.rc + rc
 
