@@ -7,7 +7,8 @@ The README's workflow for a real actor, as one resumable run within a stated bud
    tracking noise, the Live Link performances with `--data`; facedyn.processors.corpus_writer.build_corpus);
 2. `family.removal`: the family's F trained on it with the recommended flags (true skull and
    targets, skull accelerations, sample positions, batches of 2,000), epochs of `--subsample`
-   of the pairs until F_SHARE of the minutes the corpus left is spent (train-removal
+   of the pairs until the minutes the corpus left, less a reserve for stages 3 and 4 sized by
+   the session (RESERVE_S_PER_POINT_FRAME), are spent (train-removal
    --budget-minutes: it stops before an epoch that would end later, at most MAX_EPOCHS): so
    the default's epochs depend on the machine's speed and load, and `--epochs` pins them
    (the same model on the same machine);
@@ -48,7 +49,9 @@ from facedyn.processors.epoch_clock import EpochClock
 from facedyn.progress import Progress
 
 BUDGET_MINUTES = 45.0  # the whole command's, by default: the issue's target for a 70-take session of a 2.7k-point rig on 2 cores
-F_SHARE = 0.75  # of the minutes the corpus leaves, F's training takes this share; the response and the scores the rest
+RESERVE_S_PER_POINT_FRAME = 5e-6  # kept after F for the response and the scores, per session point-frame: twice the
+# 2.5 us they took on the 70-take session of the 2,735-point ARKit rig (133 s + 98 s + the bands, 37,800 frames, idle)
+RESERVE_MIN_S = 60.0  # and at least this
 MAX_EPOCHS = 250  # the paper's
 CANDIDATES = ("family", "response", "mean", "bands")  # the removals scored, in the order a tie keeps
 NOISE_CM = 0.01  # the recommended corpus's tracking noise
@@ -99,7 +102,8 @@ class CalibrateProcessor(Processor):
             raise UsageError(f"--rig {params['rig']}: no such file")
         rig = read_blendshape_rig(params["rig"])
         frame = skull_frame_id(rig.neutral, rig.topology)
-        heads = {root: TakeFrames(root, QUASISTATIC).head for root in roots}
+        readers = {root: TakeFrames(root, QUASISTATIC) for root in roots}
+        heads = {root: reader.head for root, reader in readers.items()}
         rates = sorted({round(head.fps, 6) for head in heads.values()})
         if len(rates) > 1:
             raise UsageError(f"the session's takes run at {', '.join(f'{r:g}' for r in rates)} fps; a model serves one rate: "
@@ -118,16 +122,18 @@ class CalibrateProcessor(Processor):
         if len(set(names)) != len(names):
             raise UsageError(f"two session takes share a name ({', '.join(sorted({n for n in names if names.count(n) > 1}))}); "
                              "each take's folder names it")
-        description = {"session_takes": len(roots), "rig": str(params["rig"]), "points": rig.point_count, "corpus_takes": len(specs), "corpus_fps": specs[0].fps,
+        point_frames = sum(reader.frame_count for reader in readers.values()) * rig.point_count
+        description = {"session_takes": len(roots), "session_point_frames": point_frames, "rig": str(params["rig"]),
+                       "points": rig.point_count, "corpus_takes": len(specs), "corpus_fps": specs[0].fps,
                        "budget_minutes": params["budget_minutes"], "epochs": params["epochs"] or "from the budget"}
-        return Plan(description, (request, roots, rig, specs))
+        return Plan(description, (request, roots, rig, specs, point_frames))
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
         from facedyn.dynamics.bands import EDGES_HZ
         from facedyn.io.files import sha256_of_file
         from facedyn.processors.stages import Stages, file_state, key_of
 
-        request, roots, rig, specs = plan.state
+        request, roots, rig, specs, point_frames = plan.state
         params = request.params
         out = Path(request.output)
         out.mkdir(parents=True, exist_ok=True)
@@ -138,7 +144,7 @@ class CalibrateProcessor(Processor):
         corpus = stages.run("corpus", corpus_key, [out / "corpus"], lambda: build_family_corpus(out / "corpus", rig, specs, params, progress),
                             resumes=True)
         spent = stages.seconds().get("corpus", time.perf_counter() - started)
-        budget = training_budget(params, corpus, spent)
+        budget = training_budget(params, corpus, spent, point_frames)
         limit = (f"{budget['epochs']} epochs" if budget["epochs_given"] else
                  f"{budget['training_seconds_planned'] / 60:.1f} min (at most {budget['epochs']} epochs)")
         progress.note(f"budget {params['budget_minutes']:g} min: F trains {limit} of {budget['subsample']:.0%} of {budget['pairs']:,} pairs")
@@ -197,13 +203,16 @@ def build_family_corpus(folder: Path, rig, specs: list, params: dict, progress: 
     return {"takes": len(index["takes"]), "failed": len(index["failed"]), "frames": int(index["frames"])}
 
 
-def training_budget(params: dict, corpus: dict, spent_seconds: float) -> dict:
-    """F's epochs and subsample: --epochs, else epochs of --subsample of the corpus's pairs for
-    F_SHARE of the minutes the corpus left (at least a second: one epoch), at most MAX_EPOCHS."""
+def training_budget(params: dict, corpus: dict, spent_seconds: float, session_point_frames: int) -> dict:
+    """F's epochs and subsample: --epochs, else epochs of --subsample of the corpus's pairs for the
+    minutes the corpus left less the reserve the response and the scores need on this session
+    (RESERVE_S_PER_POINT_FRAME, at least RESERVE_MIN_S; F gets at least a second: one epoch), at most MAX_EPOCHS."""
     given = params["epochs"] is not None
     left_s = max(params["budget_minutes"] * 60.0 - spent_seconds, 0.0)
+    reserve_s = max(RESERVE_S_PER_POINT_FRAME * session_point_frames, RESERVE_MIN_S)
     return {"epochs": params["epochs"] if given else MAX_EPOCHS, "epochs_given": given, "subsample": params["subsample"],
-            "pairs": corpus["frames"] * F_SAMPLES, "training_seconds_planned": None if given else round(max(F_SHARE * left_s, 1.0), 1)}
+            "pairs": corpus["frames"] * F_SAMPLES, "reserve_seconds": round(reserve_s, 1),
+            "training_seconds_planned": None if given else round(max(left_s - reserve_s, 1.0), 1)}
 
 
 def train_f(inputs: list[Path], output: Path, epochs: int, seconds: float | None, params: dict, progress: Progress) -> EpochClock:
