@@ -180,10 +180,11 @@ class CalibrateProcessor(Processor):
 
 
 def corpus_description(params: dict) -> dict:
-    """The recommended corpus's flags, as `simulate` records them."""
-    return {"scale": params["corpus_scale"], "rig": str(params["rig"]), "noise_cm": NOISE_CM, "seed": params["seed"], "physics": "tissue",
-            "randomize_tissue": "take", "extra_motions": True, "impacts": True, "data": str(params["data"] or ""),
-            "only": params["corpus_only"]}
+    """The recommended corpus's flags, as `simulate` records them; paths resolved, so a re-run that
+    names the same rig or data folder another way keeps the stages done (and F's hours)."""
+    return {"scale": params["corpus_scale"], "rig": str(Path(params["rig"]).resolve()), "noise_cm": NOISE_CM, "seed": params["seed"],
+            "physics": "tissue", "randomize_tissue": "take", "extra_motions": True, "impacts": True,
+            "data": str(Path(params["data"]).resolve()) if params["data"] else "", "only": params["corpus_only"]}
 
 
 def corpus_specs(rig, params: dict) -> list:
