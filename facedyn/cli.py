@@ -159,10 +159,11 @@ def _cmd_inspect(args) -> int:
     check_not_special(args.path)
     path = resolve_model(args.path, "inspect") if str(args.path) in SHIPPED else args.path
     if path.is_file() and not path.suffix.lower().startswith(".usd"):
+        from facedyn.dynamics.model_text import format_model_description
         from facedyn.dynamics.modelfile import describe_model
 
         model = describe_model(path)
-        print(json.dumps(model, indent=2, default=str) if args.json else "\n".join(f"{k}: {v}" for k, v in model.items()))
+        print(json.dumps(model, indent=2, default=str) if args.json else format_model_description(model))
         return EXIT_OK
     from facedyn.usd.inspect import describe_take, format_description
 
