@@ -24,7 +24,10 @@ Held-out cases (not tuned on: CMU 131_03 hopping) are marked ``held_out``. On a 
 other than the built-in face (``--rig``), only RIG_CASES run (the ICT rig has 11,248
 points: about 12 minutes on 2 cores); ``--seconds`` cuts every take shorter. A last object
 gives how far apart the skull frames of two takes of one held expression land when both
-are solved with the same actor (target <= 0.005 cm).
+are solved with the same actor (target <= 0.005 cm). Its records go through
+bench_stabilize_accuracy's Recorder (benchmarks/harness.py):
+
+    python benchmarks/bench_stabilize_accuracy.py --plain [--rig PATH] [--seconds S] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
