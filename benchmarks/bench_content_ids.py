@@ -10,15 +10,13 @@ with the in-process digest cache emptied: each layer's content id, and a whole
 in memory (the ceiling). The files were just written, so they are mostly read from the
 page cache: the figures are the hash's cost, not a cold disk's.
 
-    python benchmarks/bench_content_ids.py [--frames 5000 10000] [--workdir DIR] [--keep]
+    python benchmarks/bench_content_ids.py [--frames 5000 10000] [--workdir DIR] [--keep] [--out FILE] [--note TEXT]
 
 Prints one JSON object per frame count. Past 5,000 frames the layers are value clips.
 """
 from __future__ import annotations
 
-import argparse
 import hashlib
-import json
 import shutil
 import tempfile
 import time
@@ -33,6 +31,8 @@ from facedyn.usd.rootedit import attach
 from facedyn.usd.stackstatus import stack_status
 from facedyn.usd.take import read_inputs, stage_below
 from facedyn.usd.timing import Timing
+
+from harness import Recorder, parser
 
 SIDE = 64  # 64 x 64 = 4,096 points
 CHUNK = 500  # frames per chunk written
@@ -124,13 +124,14 @@ def sha256_speed() -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, nargs="+", default=[5000])
-    parser.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()))
-    parser.add_argument("--keep", action="store_true")
-    args = parser.parse_args()
-    for count in args.frames:
-        print(json.dumps(measure(count, args.workdir, args.keep)), flush=True)
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, nargs="+", default=[5000])
+    arguments.add_argument("--workdir", type=Path, default=Path(tempfile.gettempdir()))
+    arguments.add_argument("--keep", action="store_true")
+    args = arguments.parse_args()
+    with Recorder("bench_content_ids", args) as record:
+        for count in args.frames:
+            record(measure(count, args.workdir, args.keep))
 
 
 if __name__ == "__main__":

@@ -72,7 +72,7 @@ Every figure is RMS over the face vertices as a fraction of the true dynamics' R
 upper bound, no capture has it; ``moving_average`` = the 21-frame moving average baseline
 on the solved take. One JSON object per case.
 
-    .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--held-out-actors 0] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--session-seconds 4.5] [--work DIR]
+    .venv/bin/python benchmarks/bench_cross_sim.py [--actors 2] [--held-out-actors 0] [--epochs 8] [--subsample 0.5] [--h-epochs 20] [--seconds 1.5] [--session-seconds 4.5] [--work DIR] [--out FILE] [--note TEXT]
 
 A small-budget protocol (demo-scale corpus with the procedural talking takes, no Live Link
 performances, short takes, few epochs). Measured on 2 cores: `simulate` 106 s (under a load of
@@ -80,7 +80,6 @@ performances, short takes, few epochs). Measured on 2 cores: `simulate` 106 s (u
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import tempfile
@@ -103,6 +102,7 @@ from facedyn.sim import volumetric
 from facedyn.sim.noise import TrackerNoise, add_tracker_noise
 from facedyn.sim.volumetric import VolumetricParams
 from facedyn.sim.tissue import SimulationDiverged
+from harness import Recorder, parser
 from plain_capture import stabilize_with_cli, usdfacedyn, write_plain_cache
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -132,10 +132,6 @@ HORIZONTAL = {  # --horizontal-platforms: two of the session's platforms shaken 
     "cal_smile_platform6hz": ("cal_smile_side4hz", "platform:4:side", 1.0),  # 0.64 g
     "cal_jaw_platform10hz": ("cal_jaw_forward7hz", "platform:7:forward", 0.4),  # 0.79 g
 }
-
-
-def emit(**fields) -> None:
-    print(json.dumps(fields), flush=True)
 
 
 def test_specs(seconds: float, seed: int) -> dict[str, TakeSpec]:
@@ -395,7 +391,7 @@ def read_layers_offsets(layer: Path, root: Path) -> np.ndarray:
     return read_layers([layer, root]).offsets
 
 
-def simulate_tests(rig, specs: dict[str, TakeSpec], params: VolumetricParams, jobs: int, actor_name: str, tag: dict) -> dict:
+def simulate_tests(rig, specs: dict[str, TakeSpec], params: VolumetricParams, jobs: int, actor_name: str, tag: dict, record: Recorder) -> dict:
     """{label: simulated take} of the specs; a take whose volumetric simulation diverges is
     reported (its cases are left out) instead of ending the run."""
     try:
@@ -407,12 +403,12 @@ def simulate_tests(rig, specs: dict[str, TakeSpec], params: VolumetricParams, jo
         try:
             sims[label] = simulate_take(rig, spec, params)
         except SimulationDiverged as exc:
-            emit(case="test take diverged", actor=actor_name, test=label, **tag, error=str(exc))
+            record(dict(case="test take diverged", actor=actor_name, test=label, **tag, error=str(exc)))
     return sims
 
 
 def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path, models: dict, bands: dict, h_model, args,
-              started: float) -> tuple[str, VolumetricParams, dict, dict]:
+              started: float, record: Recorder) -> tuple[str, VolumetricParams, dict, dict]:
     """One volumetric actor's calibration and test takes through the console, and its cases;
     (name, tissue, test takes, its synthesis models from the session). `bands`: candidate recommended F's by name
     ("family" and one per --soft-hz band), one chosen per actor on its calibration session."""
@@ -420,13 +416,13 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
     params = VolumetricParams.random(seed, substeps=2)  # one step per frame diverges on CMU hopping for some actors
     actor_name = f"volumetric_{seed}"
     tag = {"held_out": True} if held_out else {}
-    emit(case="test actor", actor=actor_name, simulator="facedyn.sim.volumetric", **tag, soft_hz=round(params.soft_hz, 2),
-         damping_ratio=round(params.damping_ratio, 3), thickness_cm=round(params.thickness_cm, 2), nonlinearity=round(params.nonlinearity, 2))
+    record(dict(case="test actor", actor=actor_name, simulator="facedyn.sim.volumetric", **tag, soft_hz=round(params.soft_hz, 2),
+                damping_ratio=round(params.damping_ratio, 3), thickness_cm=round(params.thickness_cm, 2), nonlinearity=round(params.nonlinearity, 2)))
     base = (6000 if held_out else 5000) + 10 * k
     specs = test_specs(args.seconds, base)
     calibration = calibration_specs(args.session_seconds, base, args.horizontal_platforms)
     t0 = time.perf_counter()
-    sims = simulate_tests(rig, {**specs, **calibration}, params, args.jobs, actor_name, tag)
+    sims = simulate_tests(rig, {**specs, **calibration}, params, args.jobs, actor_name, tag, record)
     simulated = time.perf_counter() - t0
     tests = scratch / actor_name  # test takes are never kept: a rerun simulates them afresh
     t0 = time.perf_counter()
@@ -436,44 +432,44 @@ def run_actor(seed: int, k: int, held_out: bool, rig, work: Path, scratch: Path,
     calibrating = time.perf_counter() - t0
     chosen, ratios = choose_removal(roots, calibration, band_paths(work, args), tests / "calibration") if bands else (None, {})
     if bands:
-        emit(case="tissue band chosen on the calibration session", actor=actor_name, **tag, chosen=chosen, held_expression_spread_ratio=ratios)
+        record(dict(case="tissue band chosen on the calibration session", actor=actor_name, **tag, chosen=chosen, held_expression_spread_ratio=ratios))
     response = load_model(calibrated["linear_response"])
     session_choice, left = choose_on_session(roots, band_paths(work, args), calibrated["linear_response"], tests / "calibration")
-    emit(case="removal chosen on the session's motion left", actor=actor_name, **tag, chosen=session_choice, session_motion_left=left)
+    record(dict(case="removal chosen on the session's motion left", actor=actor_name, **tag, chosen=session_choice, session_motion_left=left))
     takes = {label: TestTake(sim, rig, tests / label, work / "actor.usda", work, calibrated["linear_response"]) for label, sim in sims.items()}
     for label in ("dialog_walk", "dialog_run", "platform_8hz"):
         if label in takes:
-            emit(**removal_case(actor_name, label, takes[label], models, fv, bands, chosen, response, session_choice), **tag)
+            record({**removal_case(actor_name, label, takes[label], models, fv, bands, chosen, response, session_choice), **tag})
     if "dialog_hop" in takes:
         for name, model in calibrated.items():
             takes["dialog_hop"].synthesized[name] = takes["dialog_hop"].synthesize(model, f"synthesized.{name}.usdc")
-        emit(**synthesis_case(actor_name, takes["dialog_hop"], h_model, response, fv), **tag)
-    emit(case="test timing", actor=actor_name, **tag, simulate_seconds=round(simulated, 1), calibrate_seconds=round(calibrating, 1),
-         total_seconds=round(time.perf_counter() - started, 1))
+        record({**synthesis_case(actor_name, takes["dialog_hop"], h_model, response, fv), **tag})
+    record(dict(case="test timing", actor=actor_name, **tag, simulate_seconds=round(simulated, 1), calibrate_seconds=round(calibrating, 1),
+                total_seconds=round(time.perf_counter() - started, 1)))
     return actor_name, params, takes, calibrated
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--actors", type=int, default=2, choices=range(0, len(ACTOR_SEEDS) + 1),
-                        help="volumetric actors of the seeds the training family was tuned against (0: only --held-out-actors)")
-    parser.add_argument("--held-out-actors", type=int, default=0, choices=range(0, len(HELD_OUT_SEEDS) + 1),
-                        help="volumetric actors from seeds never used while tuning, reported with held_out: true (final figures only)")
-    parser.add_argument("--epochs", type=int, default=8, help="epochs of every F variant (equal budgets)")
-    parser.add_argument("--subsample", type=float, default=0.5, help="fraction of pairs per epoch, every F variant")
-    parser.add_argument("--h-epochs", type=int, default=20)
-    parser.add_argument("--seconds", type=float, default=1.5, help="length of each test take")
-    parser.add_argument("--session-seconds", type=float, default=SESSION_SECONDS, help="length of each calibration take (nine "
-                        "held expressions: a 40 s session by default)")
-    parser.add_argument("--soft-hz-bands", type=lambda text: [b for b in text.split(",") if b], default=list(SOFT_HZ_BANDS),
-                        help="comma-separated simulate --soft-hz bands: the recommended F trained once more per band, one of "
-                        "them or the family's chosen per actor on its calibration session ('' for none)")
-    parser.add_argument("--horizontal-platforms", action="store_true", help="each actor's session shakes two platforms "
-                        "horizontally instead (6 Hz -> 4 Hz side to side, 1 cm; 10 Hz -> 7 Hz fore and aft, 0.4 cm)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
-    parser.add_argument("--work", type=Path, help="keep the corpus, actor and models in this folder and reuse them when there "
-                        "(a rerun tests again without training; default: a temporary folder)")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--actors", type=int, default=2, choices=range(0, len(ACTOR_SEEDS) + 1),
+                           help="volumetric actors of the seeds the training family was tuned against (0: only --held-out-actors)")
+    arguments.add_argument("--held-out-actors", type=int, default=0, choices=range(0, len(HELD_OUT_SEEDS) + 1),
+                           help="volumetric actors from seeds never used while tuning, reported with held_out: true (final figures only)")
+    arguments.add_argument("--epochs", type=int, default=8, help="epochs of every F variant (equal budgets)")
+    arguments.add_argument("--subsample", type=float, default=0.5, help="fraction of pairs per epoch, every F variant")
+    arguments.add_argument("--h-epochs", type=int, default=20)
+    arguments.add_argument("--seconds", type=float, default=1.5, help="length of each test take")
+    arguments.add_argument("--session-seconds", type=float, default=SESSION_SECONDS, help="length of each calibration take (nine "
+                           "held expressions: a 40 s session by default)")
+    arguments.add_argument("--soft-hz-bands", type=lambda text: [b for b in text.split(",") if b], default=list(SOFT_HZ_BANDS),
+                           help="comma-separated simulate --soft-hz bands: the recommended F trained once more per band, one of "
+                           "them or the family's chosen per actor on its calibration session ('' for none)")
+    arguments.add_argument("--horizontal-platforms", action="store_true", help="each actor's session shakes two platforms "
+                           "horizontally instead (6 Hz -> 4 Hz side to side, 1 cm; 10 Hz -> 7 Hz fore and aft, 0.4 cm)")
+    arguments.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    arguments.add_argument("--work", type=Path, help="keep the corpus, actor and models in this folder and reuse them when there "
+                           "(a rerun tests again without training; default: a temporary folder)")
+    args = arguments.parse_args()
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU mocap) is needed")
     from facedyn.usd.rig import write_blendshape_rig
@@ -481,7 +477,7 @@ def main() -> None:
     rig = default_face()
     fv = rig.face_vertices
     started = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="facedyn-cross-sim-") as scratch:
+    with tempfile.TemporaryDirectory(prefix="facedyn-cross-sim-") as scratch, Recorder("bench_cross_sim", args) as record:
         work = args.work or Path(scratch)
         work.mkdir(parents=True, exist_ok=True)
         if (work / "H.synthesis").is_file():
@@ -491,16 +487,16 @@ def main() -> None:
         band_seconds = train_bands(work, work / "rig.usda", args)
         corpus = json.loads((work / "corpus" / "corpus.json").read_text())
         trained = [t for t in corpus["takes"] if t["name"] not in TEST_SPEECH_TAKES.split(",")]
-        emit(case="training", simulator="facedyn.sim.tissue, random TissueParams per take", rig=rig.name,
-             takes=len(trained), frames=int(sum(t.get("frames", 0) for t in trained)), f_epochs=args.epochs, f_subsample=args.subsample,
-             h_epochs=args.h_epochs, seconds=seconds, soft_hz_bands=args.soft_hz_bands, band_seconds=band_seconds or "reused", budget="every F variant: the same epochs and subsample fraction; the paper's F without the talking takes",
-             session="two platforms shaken horizontally (--horizontal-platforms)" if args.horizontal_platforms else "five vertical platforms")
+        record(dict(case="training", simulator="facedyn.sim.tissue, random TissueParams per take", rig=rig.name,
+                    takes=len(trained), frames=int(sum(t.get("frames", 0) for t in trained)), f_epochs=args.epochs, f_subsample=args.subsample,
+                    h_epochs=args.h_epochs, seconds=seconds, soft_hz_bands=args.soft_hz_bands, band_seconds=band_seconds or "reused", budget="every F variant: the same epochs and subsample fraction; the paper's F without the talking takes",
+                    session="two platforms shaken horizontally (--horizontal-platforms)" if args.horizontal_platforms else "five vertical platforms"))
         models = {name: load_model(work / f"{name}.removal") for name in F_VARIANTS}
         h_model = load_model(work / "H.synthesis")
         bands = {name: load_model(path) for name, path in band_paths(work, args).items()} if args.soft_hz_bands else {}
         groups = [(False, ACTOR_SEEDS[: args.actors]), (True, HELD_OUT_SEEDS[: args.held_out_actors])]
         for held_out, seeds in groups:
-            actors = [run_actor(seed, k, held_out, rig, work, Path(scratch), models, bands, h_model, args, started) for k, seed in enumerate(seeds)]
+            actors = [run_actor(seed, k, held_out, rig, work, Path(scratch), models, bands, h_model, args, started, record) for k, seed in enumerate(seeds)]
             for (a_name, _, a_takes, _), (b_name, b_params, b_takes, b_calibrated) in zip(actors[:-1], actors[1:]):
                 if "dialog_hop" not in a_takes or "dialog_walk" not in b_takes:
                     continue  # reported as diverged above
@@ -508,7 +504,7 @@ def main() -> None:
                     case = retarget_case((a_name, a_takes["dialog_hop"]), (b_name, b_params, b_takes["dialog_walk"], b_calibrated), rig, work, h_model, fv)
                 except SimulationDiverged as exc:
                     case = {"case": "retargeting truth diverged", "source_actor": a_name, "target_actor": b_name, "error": str(exc)}
-                emit(**case, **({"held_out": True} if held_out else {}))
+                record({**case, **({"held_out": True} if held_out else {})})
 
 
 if __name__ == "__main__":

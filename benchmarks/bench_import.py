@@ -8,7 +8,7 @@ own process (bench_long_take.run_step): its peak RSS is the process's VmHWM; thr
 frames per second of its wall time. Cases: each --frames count as is, and resampled to
 another rate with --fps (cubic, chunk by chunk); the OBJ sequence with a gap filled.
 
-    python benchmarks/bench_import.py [--frames 10000 50000] [--obj-frames 3000] [--workdir DIR] [--keep]
+    python benchmarks/bench_import.py [--frames 10000 50000] [--obj-frames 3000] [--workdir DIR] [--keep] [--out FILE] [--note TEXT]
 
 Prints one JSON object per case. Disk: about 0.05 MB per frame for the cache and as much
 for the capture layer (50,000 frames: about 5 GB), 0.2 MB per OBJ file; removed
@@ -16,15 +16,14 @@ afterwards unless --keep.
 """
 from __future__ import annotations
 
-import argparse
 import functools
-import json
 import shutil
 from pathlib import Path
 
 import numpy as np
 
 from bench_long_take import run_step
+from harness import Recorder, parser
 from spill import work_folder, work_folder_arguments
 
 SOURCE_FPS = 120.0
@@ -101,24 +100,24 @@ def import_case(name: str, source: Path, out: Path, frames: int, *flags) -> dict
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, nargs="+", default=[10_000, 50_000])
-    parser.add_argument("--obj-frames", type=int, default=3000)
-    work_folder_arguments(parser)
-    args = parser.parse_args()
-    with work_folder("bench_import.", args) as work:
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, nargs="+", default=[10_000, 50_000])
+    arguments.add_argument("--obj-frames", type=int, default=3000)
+    work_folder_arguments(arguments)
+    args = arguments.parse_args()
+    with work_folder("bench_import.", args) as work, Recorder("bench_import", args) as record:
         for frames in args.frames:
             cache = write_usd_cache(work / f"cache_{frames}.usdc", frames)
-            print(json.dumps(import_case(f"usd {frames}", cache, work, frames)), flush=True)
+            record(import_case(f"usd {frames}", cache, work, frames))
             resampled = int((frames - 1) * RESAMPLED_FPS / SOURCE_FPS) + 1
-            print(json.dumps(import_case(f"usd {frames} resampled", cache, work, resampled, "--fps", RESAMPLED_FPS)), flush=True)
+            record(import_case(f"usd {frames} resampled", cache, work, resampled, "--fps", RESAMPLED_FPS))
             if not args.keep:
                 cache.unlink()
         if args.obj_frames:
             gap = range(args.obj_frames // 2, args.obj_frames // 2 + 5)
             folder = write_obj_sequence(work / "objs", args.obj_frames, gap)
-            print(json.dumps(import_case(f"obj {args.obj_frames} (5 missing)", folder, work, args.obj_frames,
-                                         "--fps", SOURCE_FPS, "--units", 1.0)), flush=True)
+            record(import_case(f"obj {args.obj_frames} (5 missing)", folder, work, args.obj_frames,
+                               "--fps", SOURCE_FPS, "--units", 1.0))
 
 
 if __name__ == "__main__":

@@ -9,20 +9,19 @@ by chunk so the writer never holds the take. Then `usdfacedyn import` runs in it
 (bench_long_take.run_step): its peak RSS is the process's VmHWM; throughput is frames per
 second of its wall time.
 
-    python benchmarks/bench_import_skel.py [--frames 2000 10000] [--workdir DIR] [--keep]
+    python benchmarks/bench_import_skel.py [--frames 2000 10000] [--workdir DIR] [--keep] [--out FILE] [--note TEXT]
 
 Prints one JSON object per --frames count. Disk: about 0.05 MB per frame for the capture
 layer, a few hundred bytes per frame for the animation; removed afterwards unless --keep.
 """
 from __future__ import annotations
 
-import argparse
-import json
 from pathlib import Path
 
 import numpy as np
 
 from bench_import import CHUNK, built_in_face, import_case
+from harness import Recorder, parser
 from spill import work_folder, work_folder_arguments
 
 RIG_FPS = 24.0  # USD's default rate: the rig layer is sublayered unscaled (and imports before this streamed could read it)
@@ -74,14 +73,14 @@ def write_skel_take(folder: Path, count: int) -> Path:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, nargs="+", default=[2_000, 10_000])
-    work_folder_arguments(parser)
-    args = parser.parse_args()
-    with work_folder("bench_import_skel.", args) as work:
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, nargs="+", default=[2_000, 10_000])
+    work_folder_arguments(arguments)
+    args = arguments.parse_args()
+    with work_folder("bench_import_skel.", args) as work, Recorder("bench_import_skel", args) as record:
         for frames in args.frames:
             source = write_skel_take(work, frames)
-            print(json.dumps(import_case(f"skel {frames}", source, work, frames)), flush=True)
+            record(import_case(f"skel {frames}", source, work, frames))
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ the process's VmHWM. Stabilize's throughput is vertex-frames per second of the s
 time. At the first frame count the streamed (chunked) stabilize is compared with the
 unchunked solve of the same take (the same rest and rigid mask, the take's own).
 
-    python benchmarks/bench_long_take.py [--frames 10000 50000] [--workdir DIR] [--keep]
+    python benchmarks/bench_long_take.py [--frames 10000 50000] [--workdir DIR] [--keep] [--out FILE] [--note TEXT]
 
 Prints one JSON object per frame count (and one for the chunked/unchunked comparison).
 Disk: about 0.25 MB per frame for the capture and stabilized layers and 0.5 MB for each of
@@ -19,10 +19,8 @@ quasistatic and synthesized (50,000 frames: about 15 GB); removed afterwards unl
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import io
-import json
 import shutil
 import subprocess
 import sys
@@ -31,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from harness import Recorder, parser
 from spill import work_folder, work_folder_arguments
 
 STEP = """
@@ -155,21 +154,21 @@ def chunked_vs_unchunked(root: Path, truth: np.ndarray, stabilized: Path) -> dic
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, nargs="+", default=[10_000, 50_000])
-    parser.add_argument("--fps", type=float, default=120.0)
-    work_folder_arguments(parser)
-    parser.add_argument("--compare", action="store_true", help="also compare chunked and unchunked stabilize at the first count")
-    parser.add_argument("--compare-only", action="store_true", help="only stabilize, and compare it with the unchunked solve")
-    args = parser.parse_args()
-    with work_folder("long_take.", args) as work:
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, nargs="+", default=[10_000, 50_000])
+    arguments.add_argument("--fps", type=float, default=120.0)
+    work_folder_arguments(arguments)
+    arguments.add_argument("--compare", action="store_true", help="also compare chunked and unchunked stabilize at the first count")
+    arguments.add_argument("--compare-only", action="store_true", help="only stabilize, and compare it with the unchunked solve")
+    args = arguments.parse_args()
+    with work_folder("long_take.", args) as work, Recorder("bench_long_take", args) as record:
         base, models = short_take(work, args.fps, train=not args.compare_only)
         for k, frames in enumerate(args.frames):
             take = work / f"take_{frames}"
             start = time.perf_counter()
             root, truth = write_capture(take, base, frames)
             points = truth(0, 1).shape[1]
-            record = {"case": f"long take {frames} frames", "frames": frames, "points": points,
+            fields = {"case": f"long take {frames} frames", "frames": frames, "points": points,
                       "capture_write_seconds": round(time.perf_counter() - start, 1)}
             steps = {}
             steps["stabilize"] = run_step("stabilize", root, "-o", take / "stabilized.usdc", "--attach", root)
@@ -178,12 +177,12 @@ def main() -> None:
                                            "--attach", root)
                 steps["synthesize"] = run_step("synthesize", root, "-o", take / "synthesized.hop.usdc", "--model",
                                                models / "h.synthesis", "--skull-motion", "hop", "--attach", root)
-            record["steps"] = steps
-            record["stabilize_vertex_frames_per_second"] = round(frames * points / steps["stabilize"]["seconds"])
-            record["disk_gb"] = round(sum(p.stat().st_size for p in take.rglob("*") if p.is_file()) / 2**30, 2)
-            print(json.dumps(record), flush=True)
+            fields["steps"] = steps
+            fields["stabilize_vertex_frames_per_second"] = round(frames * points / steps["stabilize"]["seconds"])
+            fields["disk_gb"] = round(sum(p.stat().st_size for p in take.rglob("*") if p.is_file()) / 2**30, 2)
+            record(fields)
             if k == 0 and (args.compare or args.compare_only):
-                print(json.dumps(chunked_vs_unchunked(root, truth(0, frames), take / "stabilized.usdc")), flush=True)
+                record(chunked_vs_unchunked(root, truth(0, frames), take / "stabilized.usdc"))
             if not args.keep:
                 shutil.rmtree(take)
 

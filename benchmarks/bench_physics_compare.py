@@ -8,12 +8,10 @@ parameters. Prints one JSON object per take and physics: the true dynamics' RMS 
 over the face region (mm), the frequency of the face's summed dynamics spectrum peak
 (Hz), and seconds per frame (wall clock, this machine).
 
-    .venv/bin/python benchmarks/bench_physics_compare.py [--seconds 5] [--data ../shared/data]
+    .venv/bin/python benchmarks/bench_physics_compare.py [--seconds 5] [--data ../shared/data] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from pathlib import Path
 
@@ -22,6 +20,8 @@ import numpy as np
 from facedyn.sim import tissue, volumetric
 from facedyn.sim.corpus import TakeSpec, expression_weights, skull_motion
 from facedyn.sim.default_face import default_face
+
+from harness import Recorder, parser
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -36,10 +36,10 @@ def spectrum_peak_hz(dynamics: np.ndarray, fps: float) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seconds", type=float, default=5.0, help="take length (s), default 5 (600 frames)")
-    parser.add_argument("--data", type=Path, default=DATA, help="shared data folder (for CMU 131_01)")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--seconds", type=float, default=5.0, help="take length (s), default 5 (600 frames)")
+    arguments.add_argument("--data", type=Path, default=DATA, help="shared data folder (for CMU 131_01)")
+    args = arguments.parse_args()
     rig = default_face()
     takes = [TakeSpec("platform9hz", "platform:9", "jaw_open", duration_s=args.seconds, seed=1),
              TakeSpec("run", "run", "jaw_open", duration_s=args.seconds, seed=2)]
@@ -47,25 +47,27 @@ def main() -> None:
     if walk.is_file():
         takes.insert(1, TakeSpec("cmu_walk_131_01", f"bvh:{walk}", "jaw_open", duration_s=args.seconds, seed=3))
     face = rig.face_vertices
-    for spec in takes:
-        trajectory = skull_motion(spec)
-        y = rig.evaluate(expression_weights(rig, spec, trajectory.frame_count))
-        skip = int(0.5 * spec.fps)  # past the expression's ease-in
-        for name, physics in (("tissue", tissue), ("volumetric", volumetric)):
-            started = time.perf_counter()
-            result = physics.simulate(y, rig.topology.triangles(), trajectory.translate, trajectory.orient, spec.fps,
-                                      rigid_weights=rig.rigid_weights, neutral=rig.neutral)
-            seconds = time.perf_counter() - started
-            dynamics = result.dynamics[skip:, face]
-            magnitude = np.linalg.norm(dynamics, axis=-1)
-            print(json.dumps({
-                "take": spec.name, "physics": name, "frames": trajectory.frame_count, "points": rig.point_count,
-                "rms_mm": round(float(np.sqrt(np.mean(magnitude**2))) * 10, 3),
-                "peak_mm": round(float(magnitude.max()) * 10, 3),
-                "spectrum_peak_hz": round(spectrum_peak_hz(dynamics, spec.fps), 2),
-                "seconds_per_frame": round(seconds / trajectory.frame_count, 4),
-                "seconds": round(seconds, 2),
-            }), flush=True)
+    with Recorder("bench_physics_compare", args) as record:
+        for spec in takes:
+            trajectory = skull_motion(spec)
+            y = rig.evaluate(expression_weights(rig, spec, trajectory.frame_count))
+            skip = int(0.5 * spec.fps)  # past the expression's ease-in
+            for name, physics in (("tissue", tissue), ("volumetric", volumetric)):
+                started = time.perf_counter()
+                result = physics.simulate(y, rig.topology.triangles(), trajectory.translate, trajectory.orient, spec.fps,
+                                          rigid_weights=rig.rigid_weights, neutral=rig.neutral)
+                seconds = time.perf_counter() - started
+                dynamics = result.dynamics[skip:, face]
+                magnitude = np.linalg.norm(dynamics, axis=-1)
+                record({
+                    "case": f"{spec.name}, {name} physics", "take": spec.name, "physics": name,
+                    "frames": trajectory.frame_count, "points": rig.point_count,
+                    "rms_mm": round(float(np.sqrt(np.mean(magnitude**2))) * 10, 3),
+                    "peak_mm": round(float(magnitude.max()) * 10, 3),
+                    "spectrum_peak_hz": round(spectrum_peak_hz(dynamics, spec.fps), 2),
+                    "seconds_per_frame": round(seconds / trajectory.frame_count, 4),
+                    "seconds": round(seconds, 2),
+                })
 
 
 if __name__ == "__main__":

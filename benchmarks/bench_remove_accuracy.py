@@ -21,13 +21,11 @@ whole mesh) as a fraction of the true dynamics' RMS:
 - removed_vs_true_quasistatic: the removed take against the noise-free true quasistatic
   skin, with the tracking noise's share of it (noise_floor) alongside.
 
-    python benchmarks/bench_remove_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--held 6 7 8 9 10 11] [--skull-features velocity acceleration] [--performances 4]
+    python benchmarks/bench_remove_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--held 6 7 8 9 10 11] [--skull-features velocity acceleration] [--performances 4] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
 import itertools
-import json
 import os
 import time
 from pathlib import Path
@@ -43,6 +41,7 @@ from facedyn.dynamics.training import TARGETS, TrainingSequence, TrainConfig, tr
 from facedyn.processors.corpus_writer import load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, SPEECH, TakeSpec, held_expressions, simulate_takes
+from harness import Recorder, parser
 from spill import scratch_folder, spill
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -111,20 +110,26 @@ def evaluate(model, group: list[Kept], face_vertices) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rig", type=Path)
-    parser.add_argument("--expressions", type=int, default=10)
-    parser.add_argument("--seconds", type=float, default=3.0)
-    parser.add_argument("--epochs", type=int, default=40)
-    parser.add_argument("--subsample", type=float, default=0.25)
-    parser.add_argument("--held", type=int, nargs="*", default=list(PLATFORM_HZ), help="held-out frequencies to evaluate")
-    parser.add_argument("--targets", nargs="*", choices=TARGETS, default=list(TARGETS))
-    parser.add_argument("--device", default="cpu", help="torch device for training (the targets are set for 2 CPU cores)")
-    parser.add_argument("--skull-features", nargs="+", choices=tuple(SKULL_INPUTS), default=["velocity"],
-                        help="F's skull inputs to compare: the paper's velocities (default) and/or facedyn's accelerations")
-    parser.add_argument("--performances", type=int, default=4, choices=range(len(PERFORMANCES) + 1), metavar=f"0..{len(PERFORMANCES)}",
-                        help="Live Link performances (not the test's) captured under every training motion, for truth targets (default 4, the speech takes: the measured configuration)")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--rig", type=Path)
+    arguments.add_argument("--expressions", type=int, default=10)
+    arguments.add_argument("--seconds", type=float, default=3.0)
+    arguments.add_argument("--epochs", type=int, default=40)
+    arguments.add_argument("--subsample", type=float, default=0.25)
+    arguments.add_argument("--held", type=int, nargs="*", default=list(PLATFORM_HZ), help="held-out frequencies to evaluate")
+    arguments.add_argument("--targets", nargs="*", choices=TARGETS, default=list(TARGETS))
+    arguments.add_argument("--device", default="cpu", help="torch device for training (the targets are set for 2 CPU cores)")
+    arguments.add_argument("--skull-features", nargs="+", choices=tuple(SKULL_INPUTS), default=["velocity"],
+                           help="F's skull inputs to compare: the paper's velocities (default) and/or facedyn's accelerations")
+    arguments.add_argument("--performances", type=int, default=4, choices=range(len(PERFORMANCES) + 1), metavar=f"0..{len(PERFORMANCES)}",
+                           help="Live Link performances (not the test's) captured under every training motion, for truth targets (default 4, the speech takes: the measured configuration)")
+    args = arguments.parse_args()
+    with Recorder("bench_remove_accuracy", args) as record:
+        measure(args, record)
+
+
+def measure(args, record: Recorder) -> None:
+    """Simulate the corpus, then train and evaluate F for each held-out frequency, target and skull input."""
     torch.set_num_threads(os.cpu_count() or 1)
     rig = load_rig(args.rig)  # the built-in face without --rig
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices)
@@ -134,8 +139,8 @@ def main() -> None:
     store = scratch_folder()
     takes = {t.spec.name: Kept(t, fv, t.spec.motion.startswith(("platform", "bvh")), store)
              for t in simulate_takes(rig, specs, jobs=os.cpu_count() or 1)}
-    print(json.dumps({"case": "corpus", "rig": rig.name, "takes": len(takes), "frames": sum(len(t.captured) for t in takes.values()),
-                      "seconds": round(time.perf_counter() - started, 1)}), flush=True)
+    record({"case": "corpus", "rig": rig.name, "takes": len(takes), "frames": sum(len(t.captured) for t in takes.values()),
+            "seconds": round(time.perf_counter() - started, 1)})
     dialog = [t for t in takes.values() if t.name.startswith("dialog")]
     for held in args.held:
         trainable = [t for t in takes.values() if not t.name.startswith("dialog") and not t.name.endswith(f"platform:{held}")]
@@ -157,7 +162,7 @@ def main() -> None:
                           "epochs": args.epochs, "subsample": args.subsample, "train_seconds": round(seconds, 1),
                           "final_train_loss_cm2": float(f"{curve['train_loss']:.4g}"), "final_val_loss_cm2": float(f"{curve['val_loss']:.4g}"),
                           **evaluate(model, group, fv)}
-                print(json.dumps(result), flush=True)
+                record(result)
 
 
 if __name__ == "__main__":

@@ -19,12 +19,10 @@ top band. F is randomly initialised: speed does not depend on the weights; the l
 is fitted on the benchmark's take itself (its two halves as a session, its ridge chosen there).
 Times are the best of ``--repeats`` runs after a warm-up run.
 
-    python benchmarks/bench_remove_speed.py [--frames 1000] [--repeats 3] [--torch-threads N] [--rig PATH|sheet]
+    python benchmarks/bench_remove_speed.py [--frames 1000] [--repeats 3] [--torch-threads N] [--rig PATH|sheet] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import tempfile
 import time
@@ -46,6 +44,8 @@ from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.geometry import quaternion
 from facedyn.kernels import runtime
 from facedyn.performance import Topology
+
+from harness import Recorder, parser
 
 ROWS, COLS, FPS, SAMPLES = 148, 76, 120.0, 344
 ICT_RIG = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"
@@ -143,20 +143,27 @@ def best_of(fn, repeats: int) -> float:
     return min(times)
 
 
-def emit(record: dict) -> None:
-    record.update(cpu_count=os.cpu_count(), torch_threads=torch.get_num_threads())
+def emit(record: Recorder, fields: dict) -> None:
+    """Record fields with the cores, torch threads and OpenCL device they were measured with."""
+    fields.update(cpu_count=os.cpu_count(), torch_threads=torch.get_num_threads())
     if runtime.available():
-        record["device"] = runtime.describe()
-    print(json.dumps(record), flush=True)
+        fields["device"] = runtime.describe()
+    record(fields)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=1000)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--torch-threads", type=int, default=None, help="torch's CPU threads (default: torch's choice)")
-    parser.add_argument("--rig", default=str(ICT_RIG), help="a blend-shape rig's mesh (default: ICT-FaceKit), or 'sheet'")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, default=1000)
+    arguments.add_argument("--repeats", type=int, default=3)
+    arguments.add_argument("--torch-threads", type=int, default=None, help="torch's CPU threads (default: torch's choice)")
+    arguments.add_argument("--rig", default=str(ICT_RIG), help="a blend-shape rig's mesh (default: ICT-FaceKit), or 'sheet'")
+    args = arguments.parse_args()
+    with Recorder("bench_remove_speed", args) as record:
+        measure(args, record)
+
+
+def measure(args, record: Recorder) -> None:
+    """Each kernel per backend, what auto picks, the whole removal, the linear response and (ICT rig) the processor."""
     if args.torch_threads:
         torch.set_num_threads(args.torch_threads)
     backends = ["numpy"] + (["opencl"] if runtime.available() else [])
@@ -180,8 +187,8 @@ def main() -> None:
         out = compute_features(world_samples, translate, orient, face.landmarks, FPS, space="world", backend=backend)
         diff = max(np.abs(out.skin - ref.skin).max() / np.abs(ref.skin).max(), np.abs(out.skull - ref.skull).max() / np.abs(ref.skull).max())
         measured.setdefault("features", {})[backend] = seconds
-        emit({"case": "features", "backend": backend, "frames": args.frames, "samples": SAMPLES, "seconds": seconds,
-              "frames_per_s": args.frames / seconds, "max_rel_diff_vs_numpy": float(diff)})
+        emit(record, {"case": "features", "backend": backend, "frames": args.frames, "samples": SAMPLES, "seconds": seconds,
+                      "frames_per_s": args.frames / seconds, "max_rel_diff_vs_numpy": float(diff)})
 
     u = propagator.apply(np.random.default_rng(0).normal(0, 0.2, (args.frames, SAMPLES, 3)))
     ref = laplacian_apply(propagator.laplacian, u, "numpy")
@@ -189,24 +196,24 @@ def main() -> None:
         seconds = best_of(lambda: laplacian_apply(propagator.laplacian, u, backend), args.repeats)
         diff = np.abs(laplacian_apply(propagator.laplacian, u, backend) - ref).max() / np.abs(ref).max()
         measured.setdefault("laplacian", {})[backend] = seconds
-        emit({"case": "laplacian", "backend": backend, "mesh": mesh_name, "points": len(points), "frames": args.frames, "seconds": seconds,
-              "frames_per_s": args.frames / seconds, "max_rel_diff_vs_numpy": float(diff)})
+        emit(record, {"case": "laplacian", "backend": backend, "mesh": mesh_name, "points": len(points), "frames": args.frames, "seconds": seconds,
+                      "frames_per_s": args.frames / seconds, "max_rel_diff_vs_numpy": float(diff)})
 
     # what --backend auto picks (it measures once per process, then remembers)
     compute_features(world_samples, translate, orient, face.landmarks, FPS, space="world", backend="auto")
     laplacian_apply(propagator.laplacian, u, "auto")
     for kernel, times in measured.items():
-        emit({"case": "auto", "kernel": kernel, "chosen": runtime.choose_backend("auto", kernel),
-              "faster_here": min(times, key=times.get), "seconds": times})
+        emit(record, {"case": "auto", "kernel": kernel, "chosen": runtime.choose_backend("auto", kernel),
+                      "faster_here": min(times, key=times.get), "seconds": times})
 
     for backend in backends:
         seconds = best_of(lambda: remove_dynamics(skull_points, translate, orient, FPS, model, backend), args.repeats)
         _, offsets = remove_dynamics(skull_points, translate, orient, FPS, model, backend)
         residual = propagator.residual(offsets, "numpy")
-        emit({"case": "removal", "features_backend": backend, "mesh": mesh_name, "points": len(points), "samples": SAMPLES, "frames": args.frames,
-              "seconds": seconds, "frames_per_s": args.frames / seconds, "target_frames_per_s": 300,
-              "one_off_setup_s": {"rig_samples_and_landmarks": setup_s, "propagation_matrix": build_s},
-              "smoothness_residual_median": float(np.median(residual))})
+        emit(record, {"case": "removal", "features_backend": backend, "mesh": mesh_name, "points": len(points), "samples": SAMPLES, "frames": args.frames,
+                      "seconds": seconds, "frames_per_s": args.frames / seconds, "target_frames_per_s": 300,
+                      "one_off_setup_s": {"rig_samples_and_landmarks": setup_s, "propagation_matrix": build_s},
+                      "smoothness_residual_median": float(np.median(residual))})
 
     start = time.perf_counter()
     response = linear_response(face, skull_points, translate, orient)
@@ -215,11 +222,11 @@ def main() -> None:
     blended = best_of(lambda: BandWeights.mean(2).combine([remove_dynamics(skull_points, translate, orient, FPS, model, "auto"),
                                                            remove_with_response(skull_points, translate, orient, FPS, response,
                                                                                 device="cpu")], FPS), args.repeats)
-    emit({"case": "removal_linear_response", "mesh": mesh_name, "points": len(points), "samples": SAMPLES, "frames": args.frames,
-          "seconds": alone, "frames_per_s": args.frames / alone, "blend_with_f_seconds": blended, "blend_with_f_frames_per_s": args.frames / blended,
-          "target_frames_per_s": 300, "one_off_fit_s": fit_s, "temporal_kernels": response.info["calibration"]["temporal_kernels"]})
+    emit(record, {"case": "removal_linear_response", "mesh": mesh_name, "points": len(points), "samples": SAMPLES, "frames": args.frames,
+                  "seconds": alone, "frames_per_s": args.frames / alone, "blend_with_f_seconds": blended, "blend_with_f_frames_per_s": args.frames / blended,
+                  "target_frames_per_s": 300, "one_off_fit_s": fit_s, "temporal_kernels": response.info["calibration"]["temporal_kernels"]})
     if rig is not None:
-        emit({"case": "removal_with_io", "mesh": mesh_name, "frames": args.frames, **removal_with_io(rig, skull_points, translate, orient, model, args.repeats)})
+        emit(record, {"case": "removal_with_io", "mesh": mesh_name, "frames": args.frames, **removal_with_io(rig, skull_points, translate, orient, model, args.repeats)})
 
 
 if __name__ == "__main__":

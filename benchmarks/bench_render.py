@@ -7,12 +7,10 @@ a nose, one uv tile or split over two), and the built-in default head at resolut
 tiles). Both are animated with small offsets, so every frame recomputes normals. The
 reference is a per-triangle Python loop over the same mesh and camera.
 
-    python benchmarks/bench_render.py [--frames 40] [--resolution 1024]
+    python benchmarks/bench_render.py [--frames 40] [--resolution 1024] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import platform
 import tempfile
@@ -26,6 +24,8 @@ from facedyn.sim.default_face import default_face
 from facedyn.preview import colormap
 from facedyn.preview.raster import Renderer, frame_camera
 from facedyn.preview.uvmaps import UVBaker, write_offset_maps
+
+from harness import Recorder, parser
 
 TARGET_FPS = 10.0
 
@@ -79,7 +79,7 @@ def loop_reference(renderer: Renderer, points: np.ndarray, colors: np.ndarray) -
     return image
 
 
-def bench_render(mesh: str, points, topology, frames: int, reference: bool) -> None:
+def bench_render(record: Recorder, mesh: str, points, topology, frames: int, reference: bool) -> None:
     tris = topology.triangles()
     for view, yaw in (("front", 0.0), ("three-quarter", 35.0)):
         normals = Renderer(tris, len(points), frame_camera(points)).normals(points)
@@ -97,24 +97,24 @@ def bench_render(mesh: str, points, topology, frames: int, reference: bool) -> N
                 times.append(time.perf_counter() - start)
             background = np.all(image == image[0, 0], axis=-1).mean()
             median = float(np.median(times))
-            print(json.dumps({
+            record({
                 "case": f"render_{mesh}_{view}_{shading}_512",
                 "points": len(points), "triangles": len(tris), "frames": frames,
                 "fps": round(frames / sum(times), 2), "median_ms_per_frame": round(1e3 * median, 2),
                 "covered_fraction": round(1.0 - float(background), 3),
                 "target_fps": TARGET_FPS, "meets_target": frames / sum(times) >= TARGET_FPS,
-            }))
+            })
             if reference and view == "front" and shading == "smooth":
                 start = time.perf_counter()
                 looped = loop_reference(renderer, sequence[0].astype(np.float64), colors[0].astype(np.float64))
                 ref_s = time.perf_counter() - start
                 ours = renderer.render(sequence[0], colors[0]).astype(float) / 255.0
                 drawn = looped.any(-1)
-                print(json.dumps({
+                record({
                     "case": f"render_{mesh}_front_smooth_512_reference_loop",
                     "fps": round(1.0 / ref_s, 3), "speedup_vectorized": round(ref_s / median, 1),
                     "max_abs_difference_on_drawn_pixels": round(float(np.abs(ours - looped)[drawn].max()), 4),
-                }))
+                })
 
 
 def grid_layouts(topology: Topology, uv: np.ndarray) -> dict[str, UVs]:
@@ -128,7 +128,7 @@ def grid_layouts(topology: Topology, uv: np.ndarray) -> dict[str, UVs]:
     }
 
 
-def bench_uv(mesh: str, points, topology, layouts: dict[str, UVs], resolution: int, frames: int) -> None:
+def bench_uv(record: Recorder, mesh: str, points, topology, layouts: dict[str, UVs], resolution: int, frames: int) -> None:
     normals = Renderer(topology.triangles(), len(points), frame_camera(points)).normals(points)
     offsets = animated(points, normals, frames).astype(np.float32)
     for name, uvs in layouts.items():
@@ -143,30 +143,31 @@ def bench_uv(mesh: str, points, topology, layouts: dict[str, UVs], resolution: i
             numbers = np.arange(1001, 1001 + frames)
             paths = write_offset_maps(folder, "offsets", baker, offsets, numbers, 96.0, __version__)
             write = (time.perf_counter() - start) / frames
-        print(json.dumps({
+        record({
             "case": f"uv_bake_{mesh}_{name}_{resolution}", "tiles": len(baker.tiles), "frames": frames,
             "precompute_s": round(precompute, 3), "bake_ms_per_frame": round(1e3 * bake, 2),
             "bake_and_write_half_exr_ms_per_frame": round(1e3 * write, 2), "files": len(paths),
-        }))
+        })
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=40)
-    parser.add_argument("--uv-frames", type=int, default=8)
-    parser.add_argument("--resolution", type=int, default=1024)
-    args = parser.parse_args()
-    print(json.dumps({
-        "case": "machine", "cpus": os.cpu_count(), "python": platform.python_version(),
-        "numpy": np.__version__, "facedyn": __version__,
-    }))
-    points, quads, uv = synthetic_face()
-    topology = Topology(np.full(len(quads), 4, np.int32), quads.ravel().astype(np.int32))
-    bench_render("grid", points, topology, args.frames, reference=True)
-    bench_uv("grid", points, topology, grid_layouts(topology, uv), args.resolution, args.uv_frames)
-    head = default_face(43)
-    bench_render("default_face", head.neutral, head.topology, args.frames, reference=False)
-    bench_uv("default_face", head.neutral, head.topology, {"two_tiles": head.uvs}, args.resolution, args.uv_frames)
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, default=40)
+    arguments.add_argument("--uv-frames", type=int, default=8)
+    arguments.add_argument("--resolution", type=int, default=1024)
+    args = arguments.parse_args()
+    with Recorder("bench_render", args) as record:
+        record({
+            "case": "machine", "cpus": os.cpu_count(), "python": platform.python_version(),
+            "numpy": np.__version__, "facedyn": __version__,
+        })
+        points, quads, uv = synthetic_face()
+        topology = Topology(np.full(len(quads), 4, np.int32), quads.ravel().astype(np.int32))
+        bench_render(record, "grid", points, topology, args.frames, reference=True)
+        bench_uv(record, "grid", points, topology, grid_layouts(topology, uv), args.resolution, args.uv_frames)
+        head = default_face(43)
+        bench_render(record, "default_face", head.neutral, head.topology, args.frames, reference=False)
+        bench_uv(record, "default_face", head.neutral, head.topology, {"two_tiles": head.uvs}, args.resolution, args.uv_frames)
 
 
 if __name__ == "__main__":

@@ -14,18 +14,18 @@ fit saw a response to find.
 Prints one JSON object per case: takes, ridges, seconds (wall and the process's CPU: on a
 shared machine the second says more), the chosen ridge and its figure.
 
-    python benchmarks/bench_response_fit.py [--takes 70] [--ridge R] [--module facedyn.dynamics.response]
+    python benchmarks/bench_response_fit.py [--takes 70] [--ridge R] [--module facedyn.dynamics.response] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import os
 import time
 
 import numpy as np
 from bench_remove_speed import sheet
+from harness import Recorder, parser
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import DynamicsModel
@@ -67,11 +67,13 @@ def session(points: np.ndarray, count: int) -> list[TrainingSequence]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--takes", type=int, default=70)
-    parser.add_argument("--ridge", type=float, default=None, help="one ridge given (default: the session chooses among RIDGES)")
-    parser.add_argument("--module", default="facedyn.dynamics.response", help="the module whose fit_linear_response to time")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.description, arguments.formatter_class = __doc__, argparse.RawDescriptionHelpFormatter  # --help shows the whole docstring
+    arguments.add_argument("--takes", type=int, default=70)
+    arguments.add_argument("--ridge", type=float, default=None, help="one ridge given (default: the session chooses among RIDGES)")
+    arguments.add_argument("--module", default="facedyn.dynamics.response", help="the module whose fit_linear_response to time")
+    args = arguments.parse_args()
+    record = Recorder("bench_response_fit", args)  # made before measuring: it notes the commit measured
     fit_linear_response = importlib.import_module(args.module).fit_linear_response
     points, topology, rigid = sheet(ROWS, COLS, rigid_rows=6)
     face = FaceSetup.build(topology, points, rigid_vertices=rigid, sample_count=SAMPLES)
@@ -82,11 +84,13 @@ def main() -> None:
     start, cpu = time.perf_counter(), time.process_time()
     model = fit_linear_response(template, takes, ridge=args.ridge)
     seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
-    record = model.info["calibration"]
-    print(json.dumps({"case": "linear response fit, ridge cross-validated", "module": args.module, "takes": args.takes,
-                      "points": len(points), "samples": len(face.samples), "rows": record["rows"], "ridges": len(record["ridge_candidates"]),
-                      "seconds": round(seconds, 1), "cpu_seconds": round(cpu, 1), "ridge": record["ridge"], "session_cross_validated_left": record["session_cross_validated_left"],
-                      "ridge_candidates": record["ridge_candidates"], "cpu_count": os.cpu_count()}))
+    calibration = model.info["calibration"]
+    with record:
+        record({"case": "linear response fit, ridge cross-validated", "module": args.module, "takes": args.takes,
+                "points": len(points), "samples": len(face.samples), "rows": calibration["rows"], "ridges": len(calibration["ridge_candidates"]),
+                "seconds": round(seconds, 1), "cpu_seconds": round(cpu, 1), "ridge": calibration["ridge"],
+                "session_cross_validated_left": calibration["session_cross_validated_left"],
+                "ridge_candidates": calibration["ridge_candidates"], "cpu_count": os.cpu_count()})
 
 
 if __name__ == "__main__":

@@ -7,12 +7,10 @@ platform with a little rocking, while its centre stretches and relaxes (a changi
 expression, so the strain-dependent stiffness is exercised too). `--mesh ict` runs the
 ICT-FaceKit rig from ../shared/data instead (needs usd-core to read it).
 
-    python benchmarks/bench_sim_speed.py [--frames 600] [--repeats 3] [--mesh grid|ict] [--held]
+    python benchmarks/bench_sim_speed.py [--frames 600] [--repeats 3] [--mesh grid|ict] [--held] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import time
 from pathlib import Path
@@ -21,6 +19,8 @@ import numpy as np
 
 from facedyn.geometry import quaternion
 from facedyn.sim.tissue import TissueParams, simulate
+
+from harness import Recorder, parser
 
 FPS = 120.0
 ICT_RIG = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"
@@ -67,12 +67,13 @@ def platform(frames: int):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=600)
-    parser.add_argument("--repeats", type=int, default=3, help="report the fastest of this many runs")
-    parser.add_argument("--mesh", choices=("grid", "ict"), default="grid")
-    parser.add_argument("--held", action="store_true", help="hold the neutral instead of the changing expression")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, default=600)
+    arguments.add_argument("--repeats", type=int, default=3, help="report the fastest of this many runs")
+    arguments.add_argument("--mesh", choices=("grid", "ict"), default="grid")
+    arguments.add_argument("--held", action="store_true", help="hold the neutral instead of the changing expression")
+    args = arguments.parse_args()
+    record = Recorder("bench_sim_speed", args)  # made before measuring: it notes the commit measured
     points, triangles, weights = grid_face() if args.mesh == "grid" else ict_face()
     if args.held:
         rest = np.broadcast_to(points.astype(np.float32), (args.frames,) + points.shape)
@@ -88,23 +89,24 @@ def main() -> None:
         if best is None or wall < best[0]:
             best = (wall, cpu)
     magnitude = np.linalg.norm(result.offsets, axis=-1)
-    print(json.dumps({
-        "case": f"simulate {args.frames} frames, {args.mesh} mesh, {'held' if args.held else 'changing'} expression",
-        "points": len(points),
-        "free_points": int((weights < 1).sum()),
-        "frames": args.frames,
-        "fps": FPS,
-        "substeps": params.substeps,
-        "seconds": round(best[0], 3),
-        "cpu_seconds": round(best[1], 3),
-        "frames_per_second": round(args.frames / best[0], 1),
-        "cpu_frames_per_second": round(args.frames / best[1], 1),
-        "target_frames_per_second": 200,
-        "factorizations": result.factorizations,
-        "peak_offset_cm": round(float(magnitude.max()), 4),
-        "p99_peak_offset_cm": round(float(np.percentile(magnitude.max(axis=0), 99)), 4),
-        "load_average": round(os.getloadavg()[0], 2),
-    }))
+    with record:
+        record({
+            "case": f"simulate {args.frames} frames, {args.mesh} mesh, {'held' if args.held else 'changing'} expression",
+            "points": len(points),
+            "free_points": int((weights < 1).sum()),
+            "frames": args.frames,
+            "fps": FPS,
+            "substeps": params.substeps,
+            "seconds": round(best[0], 3),
+            "cpu_seconds": round(best[1], 3),
+            "frames_per_second": round(args.frames / best[0], 1),
+            "cpu_frames_per_second": round(args.frames / best[1], 1),
+            "target_frames_per_second": 200,
+            "factorizations": result.factorizations,
+            "peak_offset_cm": round(float(magnitude.max()), 4),
+            "p99_peak_offset_cm": round(float(np.percentile(magnitude.max(axis=0), 99)), 4),
+            "load_average": round(os.getloadavg()[0], 2),
+        })
 
 
 if __name__ == "__main__":

@@ -15,12 +15,10 @@ dropped frames: facedyn.sim.noise), exported as mesh caches in metres, Z up, fir
 1001, imported and stabilized with the console defaults (benchmarks/plain_capture.py);
 see plain_cases below.
 
-    python benchmarks/bench_stabilize_accuracy.py [--rig ../shared/data/ict-facekit/ict_face_rig.usdc] [--plain [--seconds S]]
+    python benchmarks/bench_stabilize_accuracy.py [--rig ../shared/data/ict-facekit/ict_face_rig.usdc] [--plain [--seconds S]] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from pathlib import Path
 
@@ -30,6 +28,8 @@ from facedyn.evaluation import stabilization_errors
 from facedyn.sim.corpus import HELD_EXPRESSIONS, TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
 from facedyn.stabilize.api import stabilize
+
+from harness import Recorder, parser
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 NOISE_CM = 0.02
@@ -45,23 +45,29 @@ def takes(rig):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rig", type=Path, help="UsdSkel blend-shape rig (default: the built-in face)")
-    parser.add_argument("--iterations", type=int, default=12)
-    parser.add_argument("--plain", action="store_true", help="the plain-capture cases (no rest, no mask) instead")
-    parser.add_argument("--seconds", type=float, help="--plain: cut every take to at most this long (default: as defined)")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--rig", type=Path, help="UsdSkel blend-shape rig (default: the built-in face)")
+    arguments.add_argument("--iterations", type=int, default=12)
+    arguments.add_argument("--plain", action="store_true", help="the plain-capture cases (no rest, no mask) instead")
+    arguments.add_argument("--seconds", type=float, help="--plain: cut every take to at most this long (default: as defined)")
+    args = arguments.parse_args()
     if args.rig:
         from facedyn.usd.rig import read_blendshape_rig
 
         rig = read_blendshape_rig(args.rig)
     else:
         rig = default_face()
-    if args.plain:
-        from bench_stabilize_plain import run_plain_cases
+    with Recorder("bench_stabilize_accuracy", args) as record:
+        if args.plain:
+            from bench_stabilize_plain import run_plain_cases
 
-        run_plain_cases(rig, DATA, rig_cases=args.rig is not None, seconds=args.seconds)
-        return
+            run_plain_cases(record, rig, DATA, rig_cases=args.rig is not None, seconds=args.seconds)
+        else:
+            method_cases(record, rig, args.iterations)
+
+
+def method_cases(record: Recorder, rig, iterations: int) -> None:
+    """Every method on each take of takes(), given the rig's true neutral and bone attachment."""
     weights = rig.rigid_weights.astype(np.float64)
     three = tuple(rig.landmarks[k] for k in ("eye_corner_left", "eye_corner_right", "nose_base"))
     from facedyn.stabilize.schedule import Schedule
@@ -74,13 +80,13 @@ def main() -> None:
         for method in ("mode-pursuit", "three-point", "procrustes", "icp"):
             started = time.perf_counter()
             result = stabilize(world, take.fps, method=method, rest=rig.neutral, weights=weights, three_point=three,
-                               schedule=Schedule(iterations=args.iterations))
+                               schedule=Schedule(iterations=iterations))
             seconds = time.perf_counter() - started
             errors = stabilization_errors(result.translate, result.orient, take.skull_translate, take.skull_orient,
                                           true_skull, rig.face_vertices)
-            print(json.dumps({"case": "stabilize accuracy", "rig": rig.name, "take": spec.name, "frames": len(world),
-                              "points": rig.point_count, "expression_motion_cm": round(float(motion), 2), "method": method,
-                              **{k: round(v, 5) for k, v in errors.items()}, "seconds": round(seconds, 2)}), flush=True)
+            record({"case": "stabilize accuracy", "rig": rig.name, "take": spec.name, "frames": len(world),
+                    "points": rig.point_count, "expression_motion_cm": round(float(motion), 2), "method": method,
+                    **{k: round(v, 5) for k, v in errors.items()}, "seconds": round(seconds, 2)})
 
 
 if __name__ == "__main__":

@@ -6,25 +6,24 @@ written as a plain mesh cache (metres, Z up, first frame 1001: benchmarks/plain_
 imported, and stabilized with the command's defaults (no rest, no mask: the rigid mode is
 discovered). One JSON object:
 
-- ``command``: wall seconds of the command (start-up, reading, rigidity discovery, solve,
+- ``stabilize_command``: wall seconds of the command (start-up, reading, rigidity discovery, solve,
   writing), the best of --repeat runs and every run, with the command's own timings of its
   best run, and its accuracy against the synthetic truth (cm, deg);
 - ``in_memory``: stabilize(points, fps) on the imported points with the fast and the
   reference (PyTorch) solver in the same run: their solve seconds, the ratio (target: the
   reference >= 20x slower) and both accuracies;
 - the machine's load average before and after: the machine may be shared, so the best run
-  is the figure and the load says how busy it was.
+  is the figure and the load says how busy it was (the machine itself is in the record's
+  context, benchmarks/harness.py).
 
 Target (issue 40): the whole command <= 1.5 s on 2 cores.
 
-    python benchmarks/bench_stabilize_command.py [--repeat 5] [--skip-reference]
+    python benchmarks/bench_stabilize_command.py [--repeat 5] [--skip-reference] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
-import platform
 import resource
 import subprocess
 import sys
@@ -36,6 +35,7 @@ import numpy as np
 
 from facedyn.evaluation import stabilization_errors
 from facedyn.stabilize.synthetic import synthetic_take
+from harness import Recorder, parser
 from plain_capture import imported_points, usdfacedyn, write_plain_cache
 
 FRAMES, VERTICES, FPS = 651, 1185, 120.0
@@ -75,10 +75,11 @@ def solved_skull(layer: Path, capture: Path):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=5, help="command runs (the best is the figure)")
-    parser.add_argument("--skip-reference", action="store_true")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--repeat", type=int, default=5, help="command runs (the best is the figure)")
+    arguments.add_argument("--skip-reference", action="store_true")
+    args = arguments.parse_args()
+    record = Recorder("bench_stabilize_command", args)  # made before measuring: it notes the commit measured
     load_before = os.getloadavg()
     take = synthetic_take(frames=FRAMES, vertices=VERTICES, fps=FPS, seed=FRAMES + VERTICES)
     with tempfile.TemporaryDirectory(prefix="facedyn-bench-stabilize-") as scratch:
@@ -89,9 +90,9 @@ def main() -> None:
         runs = [run_command(folder, k) for k in range(args.repeat)]
         best = min(range(len(runs)), key=lambda k: runs[k][0])
         seconds, report, _ = runs[best]
-        record = {
+        fields = {
             "case": f"stabilize command {FRAMES}x{VERTICES}", "frames": FRAMES, "vertices": VERTICES, "fps": FPS,
-            "machine": f"{platform.machine()}, {os.cpu_count()} cores", "command": {
+            "stabilize_command": {
                 "seconds": round(seconds, 3), "seconds_all_runs": [round(r[0], 3) for r in runs],
                 "cpu_seconds": round(min(r[2] for r in runs), 3),
                 "timings": report["summary"]["seconds"], "rigid_vertices": report["summary"].get("rigid_vertices"),
@@ -103,7 +104,7 @@ def main() -> None:
     from facedyn.stabilize import stabilize
 
     fast = min((stabilize(points, FPS) for _ in range(3)), key=lambda r: r.timings["solve"])
-    record["in_memory"] = {"fast": {"solve_seconds": round(fast.timings["solve"], 4),
+    fields["in_memory"] = {"fast": {"solve_seconds": round(fast.timings["solve"], 4),
                                     "timings": {k: round(v, 4) for k, v in fast.timings.items()},
                                     "backend": fast.backend, "accuracy": errors(take, fast.translate, fast.orient)}}
     if not args.skip_reference:
@@ -111,11 +112,12 @@ def main() -> None:
 
         torch.set_num_threads(1)  # as bench_stabilize_speed.py: threads spin-wait on a shared machine
         reference = stabilize(points, FPS, solver="reference")
-        record["in_memory"]["reference"] = {"solve_seconds": round(reference.timings["solve"], 3),
+        fields["in_memory"]["reference"] = {"solve_seconds": round(reference.timings["solve"], 3),
                                             "accuracy": errors(take, reference.translate, reference.orient)}
-        record["in_memory"]["reference_solve_over_fast_solve"] = round(reference.timings["solve"] / fast.timings["solve"], 1)
-    record["load_average"] = {"before": [round(x, 2) for x in load_before], "after": [round(x, 2) for x in os.getloadavg()]}
-    print(json.dumps(record), flush=True)
+        fields["in_memory"]["reference_solve_over_fast_solve"] = round(reference.timings["solve"] / fast.timings["solve"], 1)
+    fields["load_average"] = {"before": [round(x, 2) for x in load_before], "after": [round(x, 2) for x in os.getloadavg()]}
+    with record:
+        record(fields)
 
 
 if __name__ == "__main__":

@@ -24,11 +24,13 @@ Held-out cases (not tuned on: CMU 131_03 hopping) are marked ``held_out``. On a 
 other than the built-in face (``--rig``), only RIG_CASES run (the ICT rig has 11,248
 points: about 12 minutes on 2 cores); ``--seconds`` cuts every take shorter. A last object
 gives how far apart the skull frames of two takes of one held expression land when both
-are solved with the same actor (target <= 0.005 cm).
+are solved with the same actor (target <= 0.005 cm). Its records go through
+bench_stabilize_accuracy's Recorder (benchmarks/harness.py):
+
+    python benchmarks/bench_stabilize_accuracy.py --plain [--rig PATH] [--seconds S] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import json
 import tempfile
 import time
 from dataclasses import replace
@@ -42,6 +44,7 @@ from facedyn.sim.corpus import SPEECH, TakeSpec, simulate_take
 from facedyn.sim.noise import TrackerNoise, add_tracker_noise
 from facedyn.stabilize.api import stabilize
 from facedyn.stabilize.rigidity import RigidModel
+from harness import Recorder
 from plain_capture import imported_points, stabilize_with_cli, write_plain_cache
 
 TRACKER = TrackerNoise(iid_cm=0.01, temporal_cm=0.004, spatial_cm=0.002, pop_rate=1.0, pop_cm=0.3, drop_rate=0.01)
@@ -119,7 +122,7 @@ def sized_specs(data: Path, rig_cases: bool, seconds: float | None) -> list[tupl
     return [(replace(spec, duration_s=min(spec.duration_s, seconds)), held) for spec, held in specs]
 
 
-def run_plain_cases(rig, data: Path, rig_cases: bool = False, seconds: float | None = None) -> None:
+def run_plain_cases(record: Recorder, rig, data: Path, rig_cases: bool = False, seconds: float | None = None) -> None:
     with tempfile.TemporaryDirectory(prefix="facedyn-plain-") as scratch:
         takes = [PlainTake(rig, spec, held, Path(scratch) / spec.name) for spec, held in sized_specs(data, rig_cases, seconds)]
         rigid = (rig.rigid_weights == 1).astype(np.float64)
@@ -139,7 +142,7 @@ def run_plain_cases(rig, data: Path, rig_cases: bool = False, seconds: float | N
             with_rig_actor = stabilize(points, take.fps, prior=RigidModel.known(rig.neutral, rig.rigid_weights))
             default = stabilize(points, take.fps)
             floor = take.errors(rig, oracle.translate, oracle.orient)
-            record = {
+            fields = {
                 "case": "stabilize plain capture", "rig": rig.name, "take": take.spec.name, "held_out": take.held_out,
                 "fps": take.fps, "frames": len(points), "dropped_frames": take.dropped,
                 "oracle": floor, "masked_readme": take.errors(rig, masked.translate, masked.orient),
@@ -148,11 +151,11 @@ def run_plain_cases(rig, data: Path, rig_cases: bool = False, seconds: float | N
                 "actor": take.errors(rig, with_actor.translate, with_actor.orient),
                 "actor_takes": len(others), "rig_actor": take.errors(rig, with_rig_actor.translate, with_rig_actor.orient),
             }
-            record["cli_meets_targets"] = meets_targets(record["cli"], floor)
-            record["api_default_meets_targets"] = meets_targets(record["api_default"], floor)
-            record["actor_meets_targets"] = meets_targets(record["actor"], floor)
-            record["rig_actor_meets_targets"] = meets_targets(record["rig_actor"], floor)
-            print(json.dumps(record), flush=True)
+            fields["cli_meets_targets"] = meets_targets(fields["cli"], floor)
+            fields["api_default_meets_targets"] = meets_targets(fields["api_default"], floor)
+            fields["actor_meets_targets"] = meets_targets(fields["actor"], floor)
+            fields["rig_actor_meets_targets"] = meets_targets(fields["rig_actor"], floor)
+            record(fields)
         smiles = [t for t in tuned if t.spec.expression == "smile"]
         if len(smiles) < 2:
             return
@@ -160,6 +163,6 @@ def run_plain_cases(rig, data: Path, rig_cases: bool = False, seconds: float | N
                             [t.fps for t in tuned if t.spec.expression != "smile"])
         frames = [t.frame(rig, stabilize(t.points, t.fps, prior=actor)) for t in smiles]
         apart = skull_frame_disagreement(frames[0], frames[1], rig.neutral[rig.face_vertices])
-        print(json.dumps({"case": "stabilize plain capture: one actor, one skull frame", "rig": rig.name,
-                          "takes": [t.spec.name for t in smiles], "skull_frames_apart_cm": round(apart, 5),
-                          "meets_target": apart <= MEDIAN_CM}), flush=True)
+        record({"case": "stabilize plain capture: one actor, one skull frame", "rig": rig.name,
+                "takes": [t.spec.name for t in smiles], "skull_frames_apart_cm": round(apart, 5),
+                "meets_target": apart <= MEDIAN_CM})

@@ -11,15 +11,12 @@ reference 10-100x slower and erratic, which would flatter the fast solver). Time
 whole stabilize() calls (initialization by robust ICP included); "solve" is the stage
 loop alone.
 
-    python benchmarks/bench_stabilize_speed.py [--repeat 3] [--torch-threads 1] [--skip-reference]
+    python benchmarks/bench_stabilize_speed.py [--repeat 3] [--torch-threads 1] [--skip-reference] [--out FILE] [--note TEXT]
 
-Prints one JSON object per case.
+Prints one JSON object per case (the OpenCL device in ``device``, the machine in the record's context).
 """
 from __future__ import annotations
 
-import argparse
-import json
-import platform
 import time
 
 import numpy as np
@@ -28,6 +25,8 @@ import torch
 from facedyn.kernels import runtime
 from facedyn.stabilize import Schedule, stabilize
 from facedyn.stabilize.synthetic import synthetic_take
+
+from harness import Recorder, parser
 
 CASES = [(651, 1185, 12), (651, 1185, 24), (63, 2466, 12), (63, 2466, 24)]
 FPS = 120.0
@@ -45,11 +44,17 @@ def run(take, iterations: int, solver: str, backend: str = "numpy"):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=3, help="fast-solver runs per case and backend (best is reported)")
-    parser.add_argument("--torch-threads", type=int, default=1, help="PyTorch intra-op threads for the reference")
-    parser.add_argument("--skip-reference", action="store_true")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--repeat", type=int, default=3, help="fast-solver runs per case and backend (best is reported)")
+    arguments.add_argument("--torch-threads", type=int, default=1, help="PyTorch intra-op threads for the reference")
+    arguments.add_argument("--skip-reference", action="store_true")
+    args = arguments.parse_args()
+    with Recorder("bench_stabilize_speed", args) as record:
+        measure(args, record)
+
+
+def measure(args, record: Recorder) -> None:
+    """Each case of CASES: three-point, the fast solver per backend and (unless skipped) the reference."""
     torch.set_num_threads(args.torch_threads)
     backends = ["numpy"] + (["opencl"] if runtime.available() else [])
     warm = synthetic_take(frames=120, vertices=300, fps=FPS, seed=99)
@@ -58,20 +63,20 @@ def main() -> None:
     for frames, vertices, iterations in CASES:
         take = synthetic_take(frames=frames, vertices=vertices, fps=FPS, seed=frames + vertices)
         three = stabilize(take.world, take.fps, method="three-point", rest=take.rest, three_point=take.three_point)
-        record = {
+        fields = {
             "case": f"{frames}x{vertices}@{iterations}",
             "frames": frames,
             "vertices": vertices,
             "iterations_per_stage": iterations,
             "fps": FPS,
-            "machine": f"{platform.machine()}, {runtime.describe() if runtime.available() else 'no OpenCL'}",
+            "device": runtime.describe() if runtime.available() else "no OpenCL",
             "torch_threads": torch.get_num_threads(),
             "three_point_median_error_cm": median_error(three, take),
         }
         for backend in backends:
             runs = [run(take, iterations, "fast", backend) for _ in range(args.repeat)]
             fast, seconds = min(runs, key=lambda r: r[1])
-            record[f"fast_{backend}"] = {
+            fields[f"fast_{backend}"] = {
                 "seconds": round(seconds, 4),
                 "seconds_all_runs": [round(r[1], 4) for r in runs],
                 "solve_seconds": round(fast.timings["solve"], 4),
@@ -82,7 +87,7 @@ def main() -> None:
             }
         if not args.skip_reference:
             ref, ref_seconds = run(take, iterations, "reference")
-            record["reference"] = {
+            fields["reference"] = {
                 "seconds": round(ref_seconds, 3),
                 "solve_seconds": round(ref.timings["solve"], 3),
                 "evaluations": sum(h.evaluations for h in ref.history),
@@ -90,11 +95,11 @@ def main() -> None:
                 "median_error_cm": median_error(ref, take),
             }
             for backend in backends:
-                fast = record[f"fast_{backend}"]
+                fast = fields[f"fast_{backend}"]
                 fast["speedup"] = round(ref_seconds / fast["seconds"], 1)
                 fast["solve_speedup"] = round(ref.timings["solve"] / fast["solve_seconds"], 1)
                 fast["energy_relative_to_reference"] = (fast["energy"] - ref.energy) / ref.energy
-        print(json.dumps(record), flush=True)
+        record(fields)
 
 
 if __name__ == "__main__":

@@ -4,12 +4,10 @@ The frames are random expressions of the ICT rig (../shared/data), or of a synth
 11,248-point sheet where the rig is absent. Prints one JSON object per backend: the best
 of a few runs after a warm-up (the machine's cores are shared), in seconds and frames/s.
 
-    python benchmarks/bench_stretch.py [--frames 1000] [--samples 344] [--repeats 3]
+    python benchmarks/bench_stretch.py [--frames 1000] [--samples 344] [--repeats 3] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from pathlib import Path
 
@@ -19,6 +17,8 @@ from facedyn.dynamics.samples import farthest_point_samples
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
 from facedyn.kernels import runtime
 from facedyn.performance import Topology, UVs
+
+from harness import Recorder, parser
 
 ICT_RIG = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"
 
@@ -49,11 +49,11 @@ def synthetic_frames(frames: int, samples: int):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=1000)
-    parser.add_argument("--samples", type=int, default=344)
-    parser.add_argument("--repeats", type=int, default=3)
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, default=1000)
+    arguments.add_argument("--samples", type=int, default=344)
+    arguments.add_argument("--repeats", type=int, default=3)
+    args = arguments.parse_args()
     make = ict_frames if ICT_RIG.is_file() else synthetic_frames
     mesh, topology, uvs, neutral, samples, points = make(args.frames, args.samples)
     started = time.perf_counter()
@@ -61,22 +61,23 @@ def main() -> None:
     build_seconds = time.perf_counter() - started
     rest = difference_lengths(neutral, neighbourhoods)
     backends = ["numpy"] + (["opencl"] if runtime.available() else [])
-    for backend in backends:
-        stretch_features(points, neighbourhoods, rest, backend=backend)  # warm-up: program build, first touch
-        times = []
-        for _ in range(args.repeats):
-            started = time.perf_counter()
-            stretch_features(points, neighbourhoods, rest, backend=backend)
-            times.append(time.perf_counter() - started)
-        seconds = min(times)
-        record = {
-            "case": "stretch features", "backend": backend, "mesh": mesh, "frames": args.frames,
-            "samples": neighbourhoods.sample_count, "points": points.shape[1], "seconds": round(seconds, 4),
-            "frames_per_s": round(args.frames / seconds, 1), "neighbourhoods_build_seconds": round(build_seconds, 3),
-        }
-        if backend == "opencl":
-            record["device"] = runtime.describe()
-        print(json.dumps(record))
+    with Recorder("bench_stretch", args) as record:
+        for backend in backends:
+            stretch_features(points, neighbourhoods, rest, backend=backend)  # warm-up: program build, first touch
+            times = []
+            for _ in range(args.repeats):
+                started = time.perf_counter()
+                stretch_features(points, neighbourhoods, rest, backend=backend)
+                times.append(time.perf_counter() - started)
+            seconds = min(times)
+            fields = {
+                "case": "stretch features", "backend": backend, "mesh": mesh, "frames": args.frames,
+                "samples": neighbourhoods.sample_count, "points": points.shape[1], "seconds": round(seconds, 4),
+                "frames_per_s": round(args.frames / seconds, 1), "neighbourhoods_build_seconds": round(build_seconds, 3),
+            }
+            if backend == "opencl":
+                fields["device"] = runtime.describe()
+            record(fields)
 
 
 if __name__ == "__main__":

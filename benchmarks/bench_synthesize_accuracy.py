@@ -31,15 +31,13 @@ dynamics' RMS:
   for 40 epochs on the same subsample by default (equal budgets; the training case prints
   both), every H for ``--h-epochs``.
 
-    python benchmarks/bench_synthesize_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--actors A B] [--skull-features acceleration]
+    python benchmarks/bench_synthesize_accuracy.py --rig ../shared/data/ict-facekit/ict_face_rig.usdc [--actors A B] [--skull-features acceleration] [--out FILE] [--note TEXT]
 
 ``--actors A`` runs A's training, re-synthesis and novel motion; ``--actors B`` B's training
 and the retargeting (which needs only A's simulated take, not A's networks).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import time
 from dataclasses import dataclass
@@ -58,6 +56,7 @@ from facedyn.processors.corpus_writer import load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, TakeSpec, held_expressions, simulate_take, simulate_takes
 from facedyn.sim.tissue import TissueParams, simulate
+from harness import Recorder, parser
 from spill import scratch_folder, spill
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -77,15 +76,11 @@ class Actor:
     synthesis: dict | None = None  # {"<F|Ftruth|truth>_<skull input>": H on that F's output or on the true quasistatic}
 
 
-def emit(**fields) -> None:
-    print(json.dumps(fields), flush=True)
-
-
 def fraction(estimate, truth, dynamics, vertices) -> float:
     return round(residual_fraction(estimate, truth, dynamics, vertices)["fraction"], 3)
 
 
-def train_actor(actor: Actor, expressions: int, performances: int, seconds: float, f_epochs: int, f_subsample: float, h_epochs: int,
+def train_actor(record: Recorder, actor: Actor, expressions: int, performances: int, seconds: float, f_epochs: int, f_subsample: float, h_epochs: int,
                 device: str, jobs: int, skull_inputs: list[str], f_truth_epochs: int = 0) -> None:
     """Simulate the actor's corpus (all but the held-out platform) and train F and the Hs.
 
@@ -136,17 +131,17 @@ def train_actor(actor: Actor, expressions: int, performances: int, seconds: floa
             config = synthesis_config(epochs=h_epochs, validation=(group[-1].name,), device=device, skull_motion=SKULL_INPUTS[kind])
             actor.synthesis[f"{source}_{kind}"] = train_synthesis(group, actor.face, actor.rig.uvs, y, config)
             h_seconds[f"{source}_{kind}"] = round(time.perf_counter() - t0, 1)
-    emit(case="training", actor=actor.name, rig=actor.rig.name, soft_hz=actor.tissue.soft_hz, takes=len(takes),
-         performance_takes=len(takes) - len(held), frames=int(sum(len(t.points) for t in takes)), simulate_seconds=round(simulated, 1),
-         f_epochs=f_epochs, f_truth_epochs=f_truth_epochs, f_subsample=f_subsample, f_train_seconds=f_seconds,
-         f_final_loss_cm2={k: float(f"{m.info['loss_curve'][-1]['train_loss']:.4g}") for k, m in actor.removal.items()},
-         h_epochs=h_epochs, h_train_seconds=h_seconds,
-         h_final_loss_cm2={k: float(f"{m.info['loss_curve'][-1]['train_loss']:.4g}") for k, m in actor.synthesis.items()},
-         h_validation_rms_cm={k: round(m.info["validation"]["rms_cm"], 4) for k, m in actor.synthesis.items()},
-         device=device)
+    record(dict(case="training", actor=actor.name, rig=actor.rig.name, soft_hz=actor.tissue.soft_hz, takes=len(takes),
+                performance_takes=len(takes) - len(held), frames=int(sum(len(t.points) for t in takes)), simulate_seconds=round(simulated, 1),
+                f_epochs=f_epochs, f_truth_epochs=f_truth_epochs, f_subsample=f_subsample, f_train_seconds=f_seconds,
+                f_final_loss_cm2={k: float(f"{m.info['loss_curve'][-1]['train_loss']:.4g}") for k, m in actor.removal.items()},
+                h_epochs=h_epochs, h_train_seconds=h_seconds,
+                h_final_loss_cm2={k: float(f"{m.info['loss_curve'][-1]['train_loss']:.4g}") for k, m in actor.synthesis.items()},
+                h_validation_rms_cm={k: round(m.info["validation"]["rms_cm"], 4) for k, m in actor.synthesis.items()},
+                device=device))
 
 
-def resynthesis(actor: Actor, label: str, sims: list) -> None:
+def resynthesis(record: Recorder, actor: Actor, label: str, sims: list) -> None:
     """Remove with F, re-synthesize with each H under the take's own motion (Fig. 7).
 
     Each H re-synthesizes what the F of its own quasistatic source removed: H_F_* what the
@@ -169,10 +164,10 @@ def resynthesis(actor: Actor, label: str, sims: list) -> None:
         quasistatic = removed[remover[source.split("_")[0]]]
         points = [synthesize_dynamics(y, s.skull_translate, s.skull_orient, s.fps, model)[0] for y, s in zip(quasistatic, sims)]
         result[f"H_{source}"] = fraction(np.concatenate(points), captured, dynamics, fv)
-    emit(**result)
+    record(result)
 
 
-def novel_motion(actor: Actor, label: str, sim) -> None:
+def novel_motion(record: Recorder, actor: Actor, label: str, sim) -> None:
     """Synthesize on the true quasistatic performance under the take's motion; compare offsets."""
     fv = actor.rig.face_vertices
     result = {"case": "novel motion", "actor": actor.name, "motion": label, "frames": len(sim.captured),
@@ -181,10 +176,10 @@ def novel_motion(actor: Actor, label: str, sim) -> None:
     for source, model in actor.synthesis.items():
         _, offsets = synthesize_dynamics(sim.quasistatic, sim.skull_translate, sim.skull_orient, sim.fps, model)
         result[f"H_{source}"] = fraction(offsets, sim.offsets, sim.offsets, fv)
-    emit(**result)
+    record(result)
 
 
-def retarget(a: Actor, b: Actor, source) -> None:
+def retarget(record: Recorder, a: Actor, b: Actor, source) -> None:
     """A's take under its motion onto B: B's H on the aligned trajectory vs delta transfer."""
     rigid = a.face.rigid_vertices
     t_b, q_b = align_trajectory(source.skull_translate, source.skull_orient, a.rig.neutral, b.rig.neutral, vertices=rigid)
@@ -202,29 +197,29 @@ def retarget(a: Actor, b: Actor, source) -> None:
     for name, model in b.synthesis.items():
         _, offsets = synthesize_dynamics(y_true, t_b, q_b, source.fps, model)
         result[f"synthesis_H_{name}"] = fraction(offsets, b_dynamics, b_dynamics, fv)
-    emit(**result)
+    record(result)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rig", type=Path)
-    parser.add_argument("--expressions", type=int, default=10)
-    parser.add_argument("--b-expressions", type=int, default=5, help="held expressions in actor B's corpus")
-    parser.add_argument("--seconds", type=float, default=3.0)
-    parser.add_argument("--f-epochs", type=int, default=40, help="epochs of the paper's F (default: the F on truth's budget, so the two compare at equal budgets)")
-    parser.add_argument("--f-subsample", type=float, default=0.25)
-    parser.add_argument("--f-truth-epochs", type=int, default=40,
-                        help="epochs of actor A's F on true dynamics, which removes for the Hs on truth in re-synthesis (0: the paper's F removes for all)")
-    parser.add_argument("--h-epochs", type=int, default=30)
-    parser.add_argument("--b-identity-seed", type=int, default=7)
-    parser.add_argument("--b-soft-hz", type=float, default=5.5, help="B's free-tissue frequency (A: the simulator's default)")
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
-    parser.add_argument("--actors", nargs="+", choices=("A", "B"), default=["A", "B"], help="which actors to train and evaluate")
-    parser.add_argument("--skull-features", nargs="+", choices=tuple(SKULL_INPUTS), default=list(SKULL_INPUTS), help="H's skull inputs to train and compare")
-    parser.add_argument("--performances", type=int, default=len(PERFORMANCES), choices=range(len(PERFORMANCES) + 1), metavar=f"0..{len(PERFORMANCES)}",
-                        help="Live Link performances (not the test's) in each actor's corpus, for F on truth and the Hs (default: all)")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--rig", type=Path)
+    arguments.add_argument("--expressions", type=int, default=10)
+    arguments.add_argument("--b-expressions", type=int, default=5, help="held expressions in actor B's corpus")
+    arguments.add_argument("--seconds", type=float, default=3.0)
+    arguments.add_argument("--f-epochs", type=int, default=40, help="epochs of the paper's F (default: the F on truth's budget, so the two compare at equal budgets)")
+    arguments.add_argument("--f-subsample", type=float, default=0.25)
+    arguments.add_argument("--f-truth-epochs", type=int, default=40,
+                           help="epochs of actor A's F on true dynamics, which removes for the Hs on truth in re-synthesis (0: the paper's F removes for all)")
+    arguments.add_argument("--h-epochs", type=int, default=30)
+    arguments.add_argument("--b-identity-seed", type=int, default=7)
+    arguments.add_argument("--b-soft-hz", type=float, default=5.5, help="B's free-tissue frequency (A: the simulator's default)")
+    arguments.add_argument("--device", default="cpu")
+    arguments.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    arguments.add_argument("--actors", nargs="+", choices=("A", "B"), default=["A", "B"], help="which actors to train and evaluate")
+    arguments.add_argument("--skull-features", nargs="+", choices=tuple(SKULL_INPUTS), default=list(SKULL_INPUTS), help="H's skull inputs to train and compare")
+    arguments.add_argument("--performances", type=int, default=len(PERFORMANCES), choices=range(len(PERFORMANCES) + 1), metavar=f"0..{len(PERFORMANCES)}",
+                           help="Live Link performances (not the test's) in each actor's corpus, for F on truth and the Hs (default: all)")
+    args = arguments.parse_args()
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU hopping) is needed for the dialog and hop cases")
     torch.set_num_threads(os.cpu_count() or 1)
@@ -232,24 +227,30 @@ def main() -> None:
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices)
     a = Actor("A", rig, TissueParams(), face)
     dialog_hop = simulate_take(rig, TakeSpec("dialog_cmu_hop", f"bvh:{HOP}", dialog=str(SPEECH), duration_s=5.0, seed=4243, noise_cm=NOISE_CM))
+    with Recorder("bench_synthesize_accuracy", args) as record:
+        measure(record, args, rig, a, dialog_hop)
+
+
+def measure(record: Recorder, args, rig, a: Actor, dialog_hop) -> None:
+    """A's training, re-synthesis and novel motion; B's training and the retargeting of A's take onto B (as --actors asks)."""
     if "A" in args.actors:
-        train_actor(a, args.expressions, args.performances, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs,
+        train_actor(record, a, args.expressions, args.performances, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs,
                     args.skull_features, args.f_truth_epochs)
         held = [simulate_take(rig, TakeSpec(f"{e}_platform:{HELD_HZ}", f"platform:{HELD_HZ}", e, duration_s=args.seconds, seed=900 + i, noise_cm=NOISE_CM))
                 for i, e in enumerate(held_expressions(rig, args.expressions))]
-        resynthesis(a, f"held expressions, unseen {HELD_HZ} Hz platform", held)
+        resynthesis(record, a, f"held expressions, unseen {HELD_HZ} Hz platform", held)
         del held
-        resynthesis(a, "dialog under CMU 131_03 hopping", [dialog_hop])
-        novel_motion(a, "CMU 131_03 hop", dialog_hop)
+        resynthesis(record, a, "dialog under CMU 131_03 hopping", [dialog_hop])
+        novel_motion(record, a, "CMU 131_03 hop", dialog_hop)
         run = simulate_take(rig, TakeSpec("dialog_run", "run", dialog=str(SPEECH), duration_s=5.0, seed=9001, noise_cm=NOISE_CM))
-        novel_motion(a, "procedural run (new seed)", run)
+        novel_motion(record, a, "procedural run (new seed)", run)
         del run
     if "B" in args.actors:
         b_rig = rig.make_actor(seed=args.b_identity_seed, name=f"{rig.name}_B")
         b = Actor("B", b_rig, TissueParams(soft_hz=args.b_soft_hz), FaceSetup.build(
             b_rig.topology, b_rig.neutral, rigid_weights=b_rig.rigid_weights, face_vertices=b_rig.face_vertices))
-        train_actor(b, args.b_expressions, args.performances, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs, args.skull_features)
-        retarget(a, b, dialog_hop)
+        train_actor(record, b, args.b_expressions, args.performances, args.seconds, args.f_epochs, args.f_subsample, args.h_epochs, args.device, args.jobs, args.skull_features)
+        retarget(record, a, b, dialog_hop)
 
 if __name__ == "__main__":
     main()

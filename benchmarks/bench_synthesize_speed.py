@@ -19,11 +19,10 @@ skin's count) with planar uvs, slowly stretched to stand in for expressions; the
 are randomly initialised: speed does not depend on the weights. Times are the best of
 ``--repeats`` runs after a warm-up run.
 
-    python benchmarks/bench_synthesize_speed.py [--frames 1000] [--repeats 3] [--corpus-frames 2000 10000] [--torch-threads N]
+    python benchmarks/bench_synthesize_speed.py [--frames 1000] [--repeats 3] [--corpus-frames 2000 10000] [--torch-threads N] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
 import time
 
 import numpy as np
@@ -40,6 +39,7 @@ from facedyn.dynamics.synthesis import FrameSet, stretch_arrays, synthesis_confi
 from facedyn.dynamics.training import fit
 from facedyn.kernels import runtime
 from facedyn.performance import UVs
+from harness import Recorder, parser
 
 
 def planar_uvs(points: np.ndarray) -> UVs:
@@ -64,7 +64,7 @@ def synthesis_model(face: FaceSetup, nb: UVNeighbourhoods) -> DynamicsModel:
     return DynamicsModel("synthesis", network, face, FPS, {"stretch_smoothing": 10}, arrays=stretch_arrays(nb, lengths), skull_motion=motion)
 
 
-def bench_synthesis(args, backends) -> None:
+def bench_synthesis(args, backends, record: Recorder) -> None:
     points, topology, rigid = sheet()
     face = FaceSetup.build(topology, points, rigid_vertices=rigid, sample_count=SAMPLES)
     nb = UVNeighbourhoods.build(topology, planar_uvs(points), points, face.samples)
@@ -81,10 +81,10 @@ def bench_synthesis(args, backends) -> None:
     for backend in backends:
         seconds = best_of(lambda: synthesize_dynamics(quasistatic, translate, orient, FPS, model, backend), args.repeats)
         _, offsets = synthesize_dynamics(quasistatic, translate, orient, FPS, model, backend)
-        emit({"case": "synthesize", "stretch_backend": backend, "points": len(points), "samples": SAMPLES, "frames": args.frames,
-              "seconds": seconds, "frames_per_s": args.frames / seconds, "target_frames_per_s": 300,
-              "reference_remove_dynamics_frames_per_s": args.frames / remove_s,
-              "one_off_propagation_build_s": build_s, "offset_rms_cm": float(np.sqrt(np.mean(offsets.astype(np.float64) ** 2)))})
+        emit(record, {"case": "synthesize", "stretch_backend": backend, "points": len(points), "samples": SAMPLES, "frames": args.frames,
+                      "seconds": seconds, "frames_per_s": args.frames / seconds, "target_frames_per_s": 300,
+                      "reference_remove_dynamics_frames_per_s": args.frames / remove_s,
+                      "one_off_propagation_build_s": build_s, "offset_rms_cm": float(np.sqrt(np.mean(offsets.astype(np.float64) ** 2)))})
 
     lengths = model.arrays["stretch/neutral_lengths"]
     b = model.skull_motion.features(translate, orient, face.landmarks, FPS)
@@ -102,18 +102,18 @@ def bench_synthesis(args, backends) -> None:
         "propagation": best_of(lambda: propagator.apply_into(d, offsets), args.repeats),
         "add_offsets": best_of(lambda: quasistatic + offsets, args.repeats),
     }
-    emit({"case": "synthesize_stages", "stretch_backend": "numpy", "network_device": str(device), "frames": args.frames, "points": len(points),
-          "seconds": {k: round(v, 5) for k, v in stages.items()}})
+    emit(record, {"case": "synthesize_stages", "stretch_backend": "numpy", "network_device": str(device), "frames": args.frames, "points": len(points),
+                  "seconds": {k: round(v, 5) for k, v in stages.items()}})
 
     start = time.perf_counter()
     response = linear_response(face, skull_points, translate, orient, template=model)
     fit_s = time.perf_counter() - start
     seconds = best_of(lambda: synthesize_dynamics(quasistatic, translate, orient, FPS, response, device="cpu"), args.repeats)
-    emit({"case": "synthesize_linear_response", "points": len(points), "samples": SAMPLES, "frames": args.frames, "seconds": seconds,
-          "frames_per_s": args.frames / seconds, "target_frames_per_s": 300, "one_off_fit_s": fit_s})
+    emit(record, {"case": "synthesize_linear_response", "points": len(points), "samples": SAMPLES, "frames": args.frames, "seconds": seconds,
+                  "frames_per_s": args.frames / seconds, "target_frames_per_s": 300, "one_off_fit_s": fit_s})
 
 
-def bench_training(args) -> None:
+def bench_training(args, record: Recorder) -> None:
     config = synthesis_config(epochs=1, device="cpu")
     rng = np.random.default_rng(0)
     width = 5 * SkullMotionInput().width * 3 + 2 * SAMPLES  # 5 landmarks
@@ -127,24 +127,25 @@ def bench_training(args) -> None:
             network = Network(NetworkSpec(width, SYNTHESIS_HIDDEN, 3 * SAMPLES))
             network.set_normalization(np.zeros(width), np.ones(width), np.zeros(3 * SAMPLES), 0.1)
             seconds = best_of(lambda: fit(network, examples, None, config), args.repeats)
-            emit({"case": "train_epoch", "corpus_frames": frames, "samples": SAMPLES, "batch_frames": config.batch_size,
-                  "steps": -(-frames // config.batch_size), "seconds_per_epoch": seconds,
-                  "paper_epochs": 30, "seconds_for_paper_epochs": 30 * seconds})
+            emit(record, {"case": "train_epoch", "corpus_frames": frames, "samples": SAMPLES, "batch_frames": config.batch_size,
+                          "steps": -(-frames // config.batch_size), "seconds_per_epoch": seconds,
+                          "paper_epochs": 30, "seconds_for_paper_epochs": 30 * seconds})
     torch.set_num_threads(default_threads)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=1000)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--corpus-frames", type=int, nargs="+", default=[2000, 10000])
-    parser.add_argument("--torch-threads", type=int, default=None, help="torch's CPU threads (default: torch's choice)")
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, default=1000)
+    arguments.add_argument("--repeats", type=int, default=3)
+    arguments.add_argument("--corpus-frames", type=int, nargs="+", default=[2000, 10000])
+    arguments.add_argument("--torch-threads", type=int, default=None, help="torch's CPU threads (default: torch's choice)")
+    args = arguments.parse_args()
     if args.torch_threads:
         torch.set_num_threads(args.torch_threads)
     backends = ["numpy"] + (["opencl"] if runtime.available() else [])
-    bench_synthesis(args, backends)
-    bench_training(args)
+    with Recorder("bench_synthesize_speed", args) as record:
+        bench_synthesis(args, backends, record)
+        bench_training(args, record)
 
 
 if __name__ == "__main__":

@@ -2,12 +2,10 @@
 
 Prints one JSON object per case. Target (issue 2): each under 2 s on 2 cores.
 
-    python benchmarks/bench_take_io.py [--frames 1000] [--points 11248]
+    python benchmarks/bench_take_io.py [--frames 1000] [--points 11248] [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
-import argparse
-import json
 import tempfile
 import time
 from pathlib import Path
@@ -20,6 +18,8 @@ from facedyn.usd import schema
 from facedyn.usd.layers import LayerContent, write_layer, write_take_root
 from facedyn.usd.take import read_take
 from facedyn.usd.timing import Timing
+
+from harness import Recorder, parser
 
 
 def make_layers(frames: int, points: int):
@@ -42,13 +42,13 @@ def make_layers(frames: int, points: int):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=1000)
-    parser.add_argument("--points", type=int, default=11248)
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--frames", type=int, default=1000)
+    arguments.add_argument("--points", type=int, default=11248)
+    args = arguments.parse_args()
     time_codes, contents = make_layers(args.frames, args.points)
     timing = Timing(120.0, 120.0, time_codes[0], time_codes[-1])
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, Recorder("bench_take_io", args) as record:
         folder = Path(tmp)
         written = []
         for name, (content, define) in contents.items():
@@ -57,16 +57,16 @@ def main() -> None:
             path = write_layer(folder / f"{name}.usdc", content, timing, prov, define=define)
             seconds = time.perf_counter() - started
             written.append(path)
-            print(json.dumps({"case": f"write {name} layer", "frames": args.frames, "points": args.points,
-                              "seconds": round(seconds, 3), "target_seconds": 2.0, "mb": round(path.stat().st_size / 1e6, 1)}))
+            record({"case": f"write {name} layer", "frames": args.frames, "points": args.points,
+                    "seconds": round(seconds, 3), "target_seconds": 2.0, "mb": round(path.stat().st_size / 1e6, 1)})
         root = write_take_root(folder / "take.usda", written[::-1], timing)
         for label, path in (("capture layer alone", written[0]), ("composed take (3 layers)", root)):
             started = time.perf_counter()
             perf, _ = read_take(path)
             float(perf.points.sum())  # touch every value
             seconds = time.perf_counter() - started
-            print(json.dumps({"case": f"read {label}", "frames": perf.frame_count, "points": perf.point_count,
-                              "seconds": round(seconds, 3), "target_seconds": 2.0}))
+            record({"case": f"read {label}", "frames": perf.frame_count, "points": perf.point_count,
+                    "seconds": round(seconds, 3), "target_seconds": 2.0})
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ TrainingSequence objects, true skull and true dynamics; H reads the true quasist
 lazy mapping) into the on-disk store, with at most --resident-mib of examples in memory.
 Each case prints one JSON object with the process's peak resident memory (VmHWM):
 
-    python benchmarks/bench_train_memory.py --takes 4
+    python benchmarks/bench_train_memory.py --takes 4 [--out FILE] [--note TEXT]
 """
 from __future__ import annotations
 
@@ -19,13 +19,10 @@ import time
 from collections.abc import Mapping
 from pathlib import Path
 
+from harness import Recorder, parser
 from spill import scratch_folder
 
 MOTIONS = ("walk", "hop", "platform:7", "platform:9")
-
-
-def emit(record: dict) -> None:
-    print(json.dumps(record), flush=True)
 
 
 def peak_rss_mib() -> float:
@@ -64,7 +61,7 @@ class LazyTruth(Mapping):
 
 
 def child(corpus: Path, count: int, network: str, resident_mib: int, epochs: int) -> None:
-    """Train one network on the first `count` takes; print the peak memory."""
+    """Train one network on the first `count` takes; print its case (the parent records it) with the peak memory."""
     from dataclasses import replace
 
     from facedyn.dynamics.face import FaceSetup
@@ -96,30 +93,32 @@ def child(corpus: Path, count: int, network: str, resident_mib: int, epochs: int
         config = synthesis_config(epochs=epochs, resident_bytes=budget, device="cpu")
         model = train_synthesis(takes(), face, uvs, LazyTruth({root.name: root for root in roots}), config)
         examples = model.info["training"]["train_frames"]
-    emit({"case": "train_memory", "network": network, "takes": count, "frames": count * frames, "points": face.point_count,
-          "samples": int(len(face.samples)), "train_examples": examples, "epochs": epochs, "resident_mib": resident_mib,
-          "seconds": round(time.perf_counter() - started, 1), "peak_rss_mib": round(peak_rss_mib(), 1),
-          "validation_rms_cm": round(model.info["validation"]["rms_cm"], 4)})
+    print(json.dumps({"case": "train_memory", "network": network, "takes": count, "frames": count * frames, "points": face.point_count,
+                      "samples": int(len(face.samples)), "train_examples": examples, "epochs": epochs, "resident_mib": resident_mib,
+                      "seconds": round(time.perf_counter() - started, 1), "peak_rss_mib": round(peak_rss_mib(), 1),
+                      "validation_rms_cm": round(model.info["validation"]["rms_cm"], 4)}), flush=True)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--takes", type=int, default=4, help="the small corpus; the large one has 4 times as many")
-    parser.add_argument("--seconds", type=float, default=2.0)
-    parser.add_argument("--epochs", type=int, default=2)
-    parser.add_argument("--resident-mib", type=int, default=128, help="examples in memory at once (TrainConfig.resident_bytes)")
-    parser.add_argument("--networks", nargs="+", default=["F", "H"], choices=("F", "H"))
-    parser.add_argument("--child", nargs=3, metavar=("CORPUS", "TAKES", "NETWORK"), help=argparse.SUPPRESS)
-    args = parser.parse_args()
+    arguments = parser(__doc__)
+    arguments.add_argument("--takes", type=int, default=4, help="the small corpus; the large one has 4 times as many")
+    arguments.add_argument("--seconds", type=float, default=2.0)
+    arguments.add_argument("--epochs", type=int, default=2)
+    arguments.add_argument("--resident-mib", type=int, default=128, help="examples in memory at once (TrainConfig.resident_bytes)")
+    arguments.add_argument("--networks", nargs="+", default=["F", "H"], choices=("F", "H"))
+    arguments.add_argument("--child", nargs=3, metavar=("CORPUS", "TAKES", "NETWORK"), help=argparse.SUPPRESS)
+    args = arguments.parse_args()
     if args.child:
         child(Path(args.child[0]), int(args.child[1]), args.child[2], args.resident_mib, args.epochs)
         return
     corpus = scratch_folder() / "corpus"
-    build(corpus, 4 * args.takes, args.seconds)
-    for network in args.networks:
-        for count in (args.takes, 4 * args.takes):
-            subprocess.run([sys.executable, __file__, "--child", str(corpus), str(count), network, "--resident-mib", str(args.resident_mib),
-                            "--epochs", str(args.epochs)], check=True)
+    with Recorder("bench_train_memory", args) as record:
+        build(corpus, 4 * args.takes, args.seconds)
+        for network in args.networks:
+            for count in (args.takes, 4 * args.takes):
+                done = subprocess.run([sys.executable, __file__, "--child", str(corpus), str(count), network, "--resident-mib", str(args.resident_mib),
+                                       "--epochs", str(args.epochs)], check=True, stdout=subprocess.PIPE, text=True)
+                record(json.loads(done.stdout.splitlines()[-1]))
 
 
 if __name__ == "__main__":
