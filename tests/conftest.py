@@ -19,22 +19,24 @@ from usd_fixtures import grid_mesh, write_mesh_cache
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 ICT_RIG = SHARED_DATA / "ict-facekit" / "ict_face_rig.usdc"
-# The modules that take longest (over 40 s each on an idle machine), longest first.
-LONGEST_MODULES = ("test_demo.py", "test_examples.py", "test_response.py", "test_tissue.py")
+TESTS = Path(__file__).resolve().parent
+# The modules that take longest (their tests' --durations=0 times summed), longest first.
+LONGEST_MODULES = ("test_demo.py", "test_examples.py", "dynamics/test_response.py", "sim/test_tissue.py")
 
 
 def pytest_collection_modifyitems(config, items):
     """Under xdist, the longest modules first, then those with slow tests, then the rest (each in
     its own order). Workers take whole modules in this order (setup.cfg: --dist loadfile
-    --no-loadscope-reorder), so no module as long as the demo is left to start when the
-    other worker has run out of work."""
+    --no-loadscope-reorder), so no module as long as the demo starts when the other worker is
+    about to run out of work (xdist's own order, by test count, left the one-test demo 98th of 101)."""
     if not XDIST_WORKER:
         return
     slow = {item.path for item in items if item.get_closest_marker("slow")}
 
     def rank(item) -> int:
-        if item.path.name in LONGEST_MODULES:
-            return LONGEST_MODULES.index(item.path.name)
+        module = item.path.relative_to(TESTS).as_posix() if item.path.is_relative_to(TESTS) else None
+        if module in LONGEST_MODULES:
+            return LONGEST_MODULES.index(module)
         return len(LONGEST_MODULES) + (item.path not in slow)
 
     items.sort(key=rank)
