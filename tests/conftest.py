@@ -21,7 +21,7 @@ SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 ICT_RIG = SHARED_DATA / "ict-facekit" / "ict_face_rig.usdc"
 TESTS = Path(__file__).resolve().parent
 # The modules that take longest (their tests' --durations=0 times summed), longest first.
-LONGEST_MODULES = ("test_demo.py", "test_examples.py", "dynamics/test_response.py", "sim/test_tissue.py")
+LONGEST_MODULES = ("test_demo.py", "dynamics/test_response.py", "test_examples.py", "sim/test_tissue.py")
 
 
 def pytest_collection_modifyitems(config, items):
