@@ -1,7 +1,15 @@
 """Shared fixtures: the real data beside the checkout, and small animated meshes."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+XDIST_WORKER = os.environ.get("PYTEST_XDIST_WORKER")  # set in each worker process of pytest-xdist (setup.cfg's -n)
+if XDIST_WORKER:
+    # One worker process per core: a worker's torch and BLAS threads would only wait on the other
+    # worker's core. Set before numpy and torch are imported, and inherited by the commands a test runs.
+    for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_name, "1")
 
 import numpy as np
 import pytest
@@ -11,6 +19,27 @@ from usd_fixtures import grid_mesh, write_mesh_cache
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 ICT_RIG = SHARED_DATA / "ict-facekit" / "ict_face_rig.usdc"
+TESTS = Path(__file__).resolve().parent
+# The modules that take longest (their tests' --durations=0 times summed), longest first.
+LONGEST_MODULES = ("test_demo.py", "dynamics/test_response.py", "test_examples.py", "sim/test_tissue.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under xdist, the longest modules first, then those with slow tests, then the rest (each in
+    its own order). Workers take whole modules in this order (setup.cfg: --dist loadfile
+    --no-loadscope-reorder), so no module as long as the demo starts when the other worker is
+    about to run out of work (xdist's own order, by test count, left the one-test demo 98th of 101)."""
+    if not XDIST_WORKER:
+        return
+    slow = {item.path for item in items if item.get_closest_marker("slow")}
+
+    def rank(item) -> int:
+        module = item.path.relative_to(TESTS).as_posix() if item.path.is_relative_to(TESTS) else None
+        if module in LONGEST_MODULES:
+            return LONGEST_MODULES.index(module)
+        return len(LONGEST_MODULES) + (item.path not in slow)
+
+    items.sort(key=rank)
 
 
 @pytest.fixture(scope="session")

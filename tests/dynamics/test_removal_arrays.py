@@ -150,7 +150,7 @@ def test_bad_input_is_a_clear_error(random_model, corpus):
         train_removal([TrainingSequence("short", take["points"][:15], FPS, take["translate"][:15], take["orient"][:15], "world")], face)
 
 
-@pytest.mark.slow  # trains F for 30 epochs
+@pytest.mark.slow  # trains F twice, 10 epochs each
 def test_true_targets_recover_slow_dynamics_the_moving_average_cannot_see(corpus):
     """Platforms at 1.5-2.5 Hz drive the 5 Hz tissue below resonance: its offsets change
     slowly, so the 21-frame moving average keeps most of them and its targets miss them;
@@ -167,7 +167,8 @@ def test_true_targets_recover_slow_dynamics_the_moving_average_cannot_see(corpus
     held = takes[-1]
     errors = {}
     for target in ("moving-average", "truth"):
-        config = TrainConfig(epochs=30, batch_size=1000, validation=(held.name,), seed=0, target=target)
+        # 10 epochs leave 0.86 / 0.13 of the held take's dynamics (30 epochs: 0.86 / 0.09): far from either bound
+        config = TrainConfig(epochs=10, batch_size=1000, validation=(held.name,), seed=0, target=target)
         model = train_removal(takes, face, config)
         _, removed = remove_dynamics(held.points, held.translate, held.orient, FPS, model, "numpy")
         inner = slice(20, -20)
