@@ -64,6 +64,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 import torch
 
+from facedyn.blas import single_threaded_blas
 from facedyn.dynamics.diagnostics import motion_left_beyond_sag
 from facedyn.dynamics.expression_inertia import LOWPASS_HZ, expression_inertia, translation_kernel
 from facedyn.dynamics.hardening import fit_hardening, hardening_load, stiffen
@@ -290,9 +291,10 @@ def _solver(sums: _Sums, ridge: float, landmarks: int, width: int) -> Callable[[
     penalized = gram + penalty * np.eye(len(gram))
 
     def solve(bt: np.ndarray, rt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        moments = (bt - sums.rb.T @ (sag @ rt)) / scale[:, None]
-        full = np.linalg.solve(penalized, moments)
-        return _modal_fit(gram, moments, full, penalty, landmarks, width), scale
+        with single_threaded_blas():  # many small products: threads only spin (facedyn.blas)
+            moments = (bt - sums.rb.T @ (sag @ rt)) / scale[:, None]
+            full = np.linalg.solve(penalized, moments)
+            return _modal_fit(gram, moments, full, penalty, landmarks, width), scale
 
     return solve
 

@@ -62,8 +62,6 @@ twice the steps per frame
 """
 from __future__ import annotations
 
-import ctypes
-from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,6 +69,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.interpolate import CubicSpline
 
+from facedyn.blas import single_threaded_blas
 from facedyn.errors import FacedynError
 from facedyn.geometry import mesh, quaternion
 from facedyn.sim import layout
@@ -810,33 +809,3 @@ class _FrameAccelerations:
             self.cache = {k: v for k, v in self.cache.items() if k >= f - 1}
             self.cache[f] = value
         return self.cache[f]
-
-
-@contextmanager
-def single_threaded_blas():
-    """Run the block with OpenBLAS on one thread (in this thread only), then restore.
-
-    Every BLAS call of a step (SuperLU's supernodes, the small dense products) is far too
-    small to split; OpenBLAS threads only spin, which on a shared machine slows a step
-    several times. Uses OpenBLAS's thread-local setter in each loaded copy (numpy and
-    scipy ship their own); where there is none (other BLAS, other OS) it does nothing.
-    """
-    setters = []
-    try:
-        with open("/proc/self/maps") as maps:
-            paths = sorted({line.split()[-1] for line in maps if "openblas" in line.lower() and "/" in line})
-    except OSError:
-        paths = []
-    for path in paths:
-        try:
-            setter = ctypes.CDLL(path).openblas_set_num_threads_local
-        except (OSError, AttributeError):
-            continue
-        setter.restype, setter.argtypes = ctypes.c_int, [ctypes.c_int]
-        setters.append(setter)
-    previous = [setter(1) for setter in setters]
-    try:
-        yield
-    finally:
-        for setter, count in zip(setters, previous):
-            setter(count)

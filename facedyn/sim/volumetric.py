@@ -49,10 +49,10 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
+from facedyn.blas import single_threaded_blas
 from facedyn.geometry import mesh
 from facedyn.sim import layout
-from facedyn.sim.tissue import (SimulationDiverged, SkullMotion, check_band, single_threaded_blas, substep_ladder,
-                                validate_inputs)
+from facedyn.sim.tissue import SimulationDiverged, SkullMotion, check_band, substep_ladder, validate_inputs
 
 # A prism (three tetrahedra) thinner than this fraction of its ideal volume counts as folded.
 _MIN_QUALITY = 0.2
