@@ -22,7 +22,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("actor", nargs="?", choices=sorted(ACTORS), help="the actor to generate")
     parser.add_argument("-o", "--output", type=Path, help="the actor folder to write (must not exist)")
-    parser.add_argument("--takes", default="session,test", help="comma-separated: session, test (default both)")
+    parser.add_argument("--takes", default="session,test", help="comma-separated: session, test, transfer (default session,test)")
     parser.add_argument("--seconds-scale", type=float, default=1.0, help="scales every take's length (2 s session, 2.5 s test)")
     parser.add_argument("--jobs", type=int, default=1, help="takes simulated at a time, one core each")
     parser.add_argument("--data", type=Path, default=DATA, help="the shared data folder (ICT rig, Live Link CSVs, CMU mocap)")
@@ -35,8 +35,8 @@ def main() -> None:
     if args.actor is None or args.output is None:
         parser.error("give an actor and -o FOLDER (or --list)")
     which = tuple(w for w in args.takes.split(",") if w)
-    if not set(which) <= {"session", "test"} or not which:
-        parser.error(f"--takes: expected session and/or test, got {args.takes!r}")
+    if not set(which) <= {"session", "test", "transfer"} or not which:
+        parser.error(f"--takes: expected session, test and/or transfer, got {args.takes!r}")
     if not args.seconds_scale > 0:
         parser.error("--seconds-scale must be positive")
     if not args.data.is_dir():

@@ -1,7 +1,7 @@
 """Score removals on a test-set actor's test takes (benchmarks/README-testset.md); one JSON file per run.
 
     .venv/bin/python benchmarks/testset_score.py ACTOR_FOLDER [--removal MODEL [--blend MODEL]] [--work DIR] [--results DIR] [--no-actor]
-        [--note "how MODEL was made"]
+        [--synthesis MODEL [--transfer FOLDER]] [--note "how MODEL was made"]
 
 Per test take: `usdfacedyn actor rig.usda`, then `import` + `stabilize --actor` of
 tracked.usdc (the console as a user runs it), and the figures (fraction of the true
@@ -9,7 +9,15 @@ dynamics' RMS left, testset.score): do_nothing (1.0), moving_average (21 frames,
 stabilized take) and, with --removal, `usdfacedyn remove --model MODEL [--blend MODEL]`.
 With --no-actor the takes are stabilized without `--actor` (an actor with nothing: the
 take's own skull frame, which testset.score.frame_rotation turns into the actor's to score).
-MODEL may be a shipped model's name (`default`). The run's figures, with commit, date and machine, go to RESULTS/<actor>-<UTC time>.json
+MODEL may be a shipped model's name (`default`).
+With --removal and --synthesis (the actor's synthesis model, e.g. calibrate's synthesis.response),
+each transfer take (one test take's expression under another's skull; `testset_generate.py
+--takes transfer`, in the actor folder or in --transfer FOLDER, the same actor) is scored as
+the issue's synthesis and retargeting cases: the expression take's quasistatic layer (from
+the removal) `synthesize`d under the motion take's solved skull (`synthesis`), `retarget`ed
+from the motion take with the model (`retarget`) and by copying the motion take's removed
+offsets (`delta_transfer`), each against the transfer take's true dynamics; and
+`retarget_to_delta_transfer`, their ratio (issue 37: synthesis <= 0.3, the ratio <= 0.5). The run's figures, with commit, date and machine, go to RESULTS/<actor>-<UTC time>.json
 (default benchmarks/results/testset/) and to stdout, one JSON object per take.
 """
 from __future__ import annotations
@@ -47,6 +55,8 @@ def main() -> None:
     parser.add_argument("--blend", type=Path, help="with --removal: remove --blend (a linear response)")
     parser.add_argument("--work", type=Path, help="keep the imported takes here (default: a temporary folder)")
     parser.add_argument("--results", type=Path, default=REPO / "benchmarks" / "results" / "testset")
+    parser.add_argument("--synthesis", type=Path, help="with --removal: the actor's synthesis model, scored on the transfer takes")
+    parser.add_argument("--transfer", type=Path, help="the actor folder holding its transfer takes (default: ACTOR_FOLDER)")
     parser.add_argument("--note", default="", help="how the removal model was made (the results page shows it beside the figures)")
     args = parser.parse_args()
     info_path = args.actor / "actor.json"
@@ -56,10 +66,15 @@ def main() -> None:
     tests = [t["name"] for t in info["takes"] if t["kind"] == "test"]
     if not tests:
         sys.exit(f"{args.actor}: has no test takes (generate it with --takes test)")
+    if args.synthesis is not None and (args.removal is None or args.no_actor):
+        sys.exit("--synthesis needs --removal (synthesis and retargeting start from the removal's quasistatic takes) and the actor's "
+                 "frame (not --no-actor)")
+    transfers = transfer_takes(args.transfer or args.actor, args.actor, tests) if args.synthesis is not None else []
     run = {"actor": info["actor"]["name"], "split": info["actor"]["split"], "commit": commit(),
            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
            "cpus": os.cpu_count(), "removal": args.removal and str(args.removal), "blend": args.blend and str(args.blend),
-           "stabilized": "without --actor" if args.no_actor else "with --actor", **({"note": args.note} if args.note else {}), "takes": []}
+           "stabilized": "without --actor" if args.no_actor else "with --actor", "synthesis": args.synthesis and str(args.synthesis),
+           **({"note": args.note} if args.note else {}), "takes": []}
     with tempfile.TemporaryDirectory(prefix="facedyn-testset-") as scratch:
         work = args.work or Path(scratch)
         work.mkdir(parents=True, exist_ok=True)
@@ -78,11 +93,15 @@ def main() -> None:
                     "moving_average": round(fraction_left(moving_average_estimate(stabilized.points, truth) @ turn.T, truth), 4)}
             if args.removal is not None:
                 layer = folder / "quasistatic.usdc"
-                usdfacedyn("remove", str(folder / "take.usda"), "-o", str(layer), "--model", str(args.removal),
-                           *(("--blend", str(args.blend)) if args.blend else ()))
+                usdfacedyn("remove", str(folder / "take.usda"), "-o", str(layer), "--attach", str(folder / "take.usda"),
+                           "--model", str(args.removal), *(("--blend", str(args.blend)) if args.blend else ()))
                 case["removal"] = round(fraction_left(read_layers([layer, folder / "take.usda"]).offsets @ turn.T, truth), 4)
             print(json.dumps(case), flush=True)
             run["takes"].append(case)
+        for recipe in transfers:
+            case = score_transfer(recipe, args.transfer or args.actor, work, args.synthesis)
+            print(json.dumps(case), flush=True)
+            run.setdefault("transfers", []).append(case)
     dialogs = [c for c in run["takes"] if c["take"].startswith("dialog")]
     if dialogs:
         run["dialogs_mean"] = {key: round(sum(c[key] for c in dialogs) / len(dialogs), 4) for key in dialogs[0] if key not in ("take", "frames")}
@@ -90,6 +109,51 @@ def main() -> None:
     path = args.results / f"{run['actor']}-{run['date'].replace(':', '').replace('+0000', 'Z')}.json"
     path.write_text(json.dumps(run, indent=1) + "\n")
     print(json.dumps({"written": str(path)}))
+
+
+def transfer_takes(folder: Path, actor: Path, tests: list[str]) -> list[dict]:
+    """The transfer takes' recipes in `folder` (an actor folder of the same actor as `actor`,
+    both of whose sources are `tests`); exits with the reason where there are none."""
+    info_path = folder / "actor.json"
+    if not info_path.is_file():
+        sys.exit(f"{folder}: not an actor folder (no actor.json)")
+    if (folder / "rig.usda").read_bytes() != (actor / "rig.usda").read_bytes():
+        sys.exit(f"{folder}: its rig.usda is not {actor}'s: the transfer takes must be the same actor's")
+    recipes = [t for t in json.loads(info_path.read_text())["takes"] if t["kind"] == "transfer"]
+    if not recipes:
+        sys.exit(f"{folder}: has no transfer takes (generate them with --takes transfer)")
+    for recipe in recipes:
+        missing = [name for name in recipe["sources"] if name not in tests]
+        if missing:
+            sys.exit(f"{folder}: transfer take {recipe['name']} needs the test takes {missing}, which {actor} lacks")
+    return recipes
+
+
+def score_transfer(recipe: dict, folder: Path, work: Path, model: Path) -> dict:
+    """One transfer take's synthesis, retargeting and delta transfer (the module's docstring);
+    the sources' take roots in `work` hold their quasistatic layers (the removal)."""
+    from facedyn.evaluation import residual_fraction
+    from facedyn.usd.take import read_layers
+    from testset.score import dynamics_rms_mm, fraction_left, load_truth
+
+    expression_take, motion_take = recipe["sources"]
+    truth = load_truth(folder, recipe["name"])
+    target, source = work / expression_take / "take.usda", work / motion_take / "take.usda"
+    out = work / recipe["name"]
+    out.mkdir(exist_ok=True)
+    commands = {"synthesis": ("synthesize", str(target), "--model", str(model), "--skull-motion", str(source)),
+                "retarget": ("retarget", str(target), "--source", str(source), "--model", str(model)),
+                "delta_transfer": ("retarget", str(target), "--source", str(source), "--method", "delta-transfer")}
+    case = {"take": recipe["name"], "expression_of": expression_take, "motion_of": motion_take, "frames": len(truth["dynamics"]),
+            "dynamics_rms_mm": round(dynamics_rms_mm(truth), 3)}
+    for name, command in commands.items():
+        layer = out / f"{name}.usdc"
+        usdfacedyn(*command, "-o", str(layer))
+        offsets = read_layers([layer, target]).offsets
+        case[name] = round(fraction_left(offsets, truth), 4)
+        case[f"{name}_rms_mm"] = round(residual_fraction(offsets, 0 * truth["dynamics"], truth["dynamics"], truth["face_vertices"])["residual_rms_cm"] * 10, 3)
+    case["retarget_to_delta_transfer"] = round(case["retarget"] / case["delta_transfer"], 3)
+    return case
 
 
 if __name__ == "__main__":

@@ -38,7 +38,7 @@ import numpy as np
 from facedyn.geometry import quaternion
 from facedyn.sim.noise import TrackerNoise, add_tracker_noise
 from facedyn.rig import FaceRig
-from testset.actors import FPS, SUBSTEPS, ActorSpec, session_takes, test_takes
+from testset.actors import FPS, SUBSTEPS, ActorSpec, session_takes, test_takes, transfer_takes
 from testset.takes import LEAD_S, TakeRecipe, expression_weights, skull_trajectory
 from testset.tissue import Drive, MujocoTissue, TissueParams
 
@@ -143,6 +143,8 @@ def generate_actor(spec: ActorSpec, out: Path, data: Path, which: tuple[str, ...
         recipes += session_takes(spec.take_seed, 2.0 * seconds_scale)
     if "test" in which:
         recipes += test_takes(spec.take_seed, 2.5 * seconds_scale)
+    if "transfer" in which:
+        recipes += transfer_takes(spec.take_seed, 2.5 * seconds_scale)
     out.parent.mkdir(parents=True, exist_ok=True)
     scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:

@@ -29,12 +29,17 @@ HELD = {
     "frown": {"mouthFrown_L": 0.7, "mouthFrown_R": 0.7, "browDown_L": 0.5, "browDown_R": 0.5},
     "sneer": {"noseSneer_L": 0.7, "noseSneer_R": 0.7, "mouthUpperUp_L": 0.4, "mouthUpperUp_R": 0.4},
     "funnel": {"mouthFunnel": 0.7, "jawOpen": 0.15},
+    "squint": {"eyeSquint_L": 0.7, "eyeSquint_R": 0.7, "eyeBlink_L": 0.2, "eyeBlink_R": 0.2},
+    "jaw_side": {"jawLeft": 0.5, "mouthStretch_L": 0.3},
+    "stretch": {"mouthStretch_L": 0.6, "mouthStretch_R": 0.6, "jawOpen": 0.1},
 }
 
 
 @dataclass(frozen=True)
 class TakeRecipe:
-    """One take: `kind` is "session" (held expressions, for calibration) or "test"."""
+    """One take: `kind` is "session" (held expressions, for calibration), "test", or "transfer"
+    (one test take's expression under another's skull motion: the truth that synthesis and
+    retargeting are scored against; `sources` names the two, expression first)."""
 
     name: str
     kind: str
@@ -43,6 +48,12 @@ class TakeRecipe:
     dialog: str | None = None  # a Live Link CSV in the shared livelink-face folder
     duration_s: float = 3.0
     seed: int = 0
+    motion_seed: int | None = None  # the skull trajectory's seed (None: `seed`)
+    sources: tuple[str, ...] = ()  # a transfer take's (expression take, motion take)
+
+    @property
+    def skull_seed(self) -> int:
+        return self.seed if self.motion_seed is None else self.motion_seed
 
 
 def skull_trajectory(recipe: TakeRecipe, data: Path, fps: float) -> SkullTrajectory:
@@ -51,12 +62,12 @@ def skull_trajectory(recipe: TakeRecipe, data: Path, fps: float) -> SkullTraject
     kind, _, arg = recipe.motion.partition(":")
     if kind == "platform":
         hz, axis = motion.parse_platform(arg)
-        return motion.platform(hz, motion.PLATFORM_AMPLITUDE_CM, duration_s=seconds, fps=fps, seed=recipe.seed, axis=axis)
+        return motion.platform(hz, motion.PLATFORM_AMPLITUDE_CM, duration_s=seconds, fps=fps, seed=recipe.skull_seed, axis=axis)
     if kind == "bvh":
         name, _, speed = arg.partition("@")
         speed = float(speed or 1.0)
         # seconds * speed of the capture sampled every speed / fps s, played back every 1 / fps s: `speed` times faster
-        played = motion.from_bvh(data / "cmu-mocap" / name, "Head", duration_s=seconds * speed, fps=fps / speed, seed=recipe.seed)
+        played = motion.from_bvh(data / "cmu-mocap" / name, "Head", duration_s=seconds * speed, fps=fps / speed, seed=recipe.skull_seed)
         return SkullTrajectory(played.translate, played.orient, fps)
     raise ValueError(f"take {recipe.name}: unknown motion {recipe.motion!r} (platform:HZ or bvh:FILE[@SPEED])")
 

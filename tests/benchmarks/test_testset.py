@@ -141,3 +141,28 @@ def test_a_faster_mocap_is_the_same_path_in_less_time():
     assert len(normal.translate) == len(fast.translate) == round((LEAD_S + 1.0) * 60)
     step = lambda t: np.linalg.norm(np.diff(t.translate, axis=0), axis=1).mean()  # noqa: E731
     assert step(fast) == pytest.approx(1.6 * step(normal), rel=0.25)
+
+
+def test_the_session_is_held_apart_from_the_test_takes_and_a_transfer_take_is_theirs_crossed():
+    """The session (the issue's protocol: ten held expressions on five platforms and under two
+    real motions) holds none of the test takes' expression, frequency or mocap, nor their seeds;
+    a transfer take plays the walking dialog's expression under exactly the run's skull."""
+    from testset.actors import session_takes, test_takes, transfer_takes
+    from testset.takes import expression_weights, skull_trajectory
+
+    session, tests, (transfer,) = session_takes(2101), test_takes(2101), transfer_takes(2101)
+    assert len(session) == 70 and len({t.name for t in session}) == 70
+    assert {t.expression for t in session}.isdisjoint({t.expression for t in tests if t.expression})
+    assert not any(t.motion in ("platform:8", "bvh:131_02.bvh") or "131_02" in t.motion for t in session)
+    assert {t.seed for t in session}.isdisjoint({t.seed for t in tests} | {transfer.seed, transfer.skull_seed})
+    walk, run, _ = tests
+    assert transfer.kind == "transfer" and transfer.sources == ("dialog_walk", "dialog_run")
+    data = BENCHMARKS.parents[1] / "shared" / "data"
+    if not (data / "cmu-mocap" / "131_02.bvh").is_file():
+        pytest.skip(f"{data}: the shared CMU mocap is not here")
+    crossed, driving = skull_trajectory(transfer, data, 60.0), skull_trajectory(run, data, 60.0)
+    np.testing.assert_array_equal(crossed.translate, driving.translate)
+    np.testing.assert_array_equal(crossed.orient, driving.orient)
+    names = ("jawOpen", "mouthFunnel", "mouthSmile_L")
+    np.testing.assert_array_equal(expression_weights(transfer, names, data, 60.0, 90), expression_weights(walk, names, data, 60.0, 90))
+    assert not np.array_equal(expression_weights(transfer, names, data, 60.0, 90), expression_weights(run, names, data, 60.0, 90))

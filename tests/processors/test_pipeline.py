@@ -302,19 +302,24 @@ def test_a_linear_response_is_scored_left_out_on_its_session_and_blends_with_f(c
     assert cli("evaluate", *roots, "--session", "true", "--removal", models / "f.removal", "--blend", response, "-o", tmp_path / "blend") == 0
     for k, root in enumerate(roots):  # by hand: fitted on the other takes (before any is removed), removed from this one
         assert cli("train-synthesis", *(r for r in roots if r != root), "-o", tmp_path / f"without_{k}.response", *fit) == 0
-    for k, root in enumerate(roots):
-        assert cli("remove", root, "-o", root.parent / "quasistatic.usdc", "--attach", root, "--model", tmp_path / f"without_{k}.response") == 0
-    assert cli("evaluate", *roots, "--session", "true", "-o", tmp_path / "by_hand") == 0
+    for name, model_of in (("in_sample", lambda k: response), ("by_hand", lambda k: tmp_path / f"without_{k}.response")):
+        for k, root in enumerate(roots):
+            assert cli("remove", root, "-o", root.parent / "quasistatic.usdc", "--attach", root, "--model", model_of(k)) == 0
+        assert cli("evaluate", *roots, "--session", "true", "-o", tmp_path / name) == 0
     assert cli("train-synthesis", *roots, "-o", tmp_path / "refit.response", *fit) == 0  # training reads below the removal now attached
     assert (tmp_path / "refit.response").read_bytes() == response.read_bytes()
-    left_out, blend, by_hand = (json.loads((tmp_path / d / "report.json").read_text())["session"]["motion_left_beyond_sag"]
-                                for d in ("left_out", "blend", "by_hand"))
+    left_out, blend, by_hand, in_sample = (json.loads((tmp_path / d / "report.json").read_text())["session"]["motion_left_beyond_sag"]
+                                           for d in ("left_out", "blend", "by_hand", "in_sample"))
     # four 2 s takes of which each left out is new in its motion (a hop, a walk, two platforms): the
-    # response fitted on three over-predicts the fourth (measured 3.3 in its modal form), which is
-    # what this truth-free figure is there to show; the blend with F leaves less (1.6). Left out, every fit
-    # keeps the stiffening fitted on the whole session (response._fits_without_each); by hand each refit
-    # fits its own (measured 2.26 against 2.62)
-    assert 0 < left_out < 5 and left_out == pytest.approx(by_hand, rel=0.2) and 0 < blend < left_out
+    # response fitted on three over-predicts the fourth (measured 2.5), which is what this
+    # truth-free figure is there to show; the blend with F leaves less. Left out, every fit keeps the
+    # stiffening fitted on the whole session (response._fits_without_each; equal to a refit with it
+    # in tests/dynamics/test_response.py); by hand each refit fits its own, on three takes, which
+    # the stabilizer's rounding moves (by hand 2.6 with NumPy's solve, 3.4 with OpenCL's). What the
+    # console must show is the refit's figure, not what the response does to the takes it was
+    # fitted on (in sample: 0.19)
+    assert 0 < in_sample < 1 < left_out < 5 and 0 < blend < left_out
+    assert abs(left_out - by_hand) < abs(left_out - in_sample) / 2
 
     take = tmp_path / "take"
     shutil.copytree(folder / "pucker_walk", take)
