@@ -69,10 +69,14 @@ SECTIONS = (
     ("testset", "Test set",
      "Actors made by a soft-tissue solver facedyn did not write (MuJoCo flex, benchmarks/README-testset.md), scored by "
      "`benchmarks/testset_score.py` (`benchmarks/results/testset/`): the fraction of the true dynamics' RMS a removal leaves "
-     "on the face region, solved skull, plain captures with tracker noise. Validation actors are tuned on; a test actor is "
+     "on the face region, solved skull, plain captures with tracker noise; static_share: the part of the truth that does not "
+     "move over the take, which no estimate averaging to zero can remove. With `--synthesis`, the transfer take (one test "
+     "take's expression under another's skull) scores synthesis, retargeting and delta transfer against its truth (issue 37: "
+     "synthesis <= 30 %, retargeting <= 0.5x delta transfer). Validation actors are tuned on; a test actor is "
      "run once per finished change and never used to choose."),
 )
-TESTSET_COLUMNS = ("take", "frames", "dynamics_rms_mm", "do_nothing", "moving_average", "removal")
+TESTSET_COLUMNS = ("take", "frames", "dynamics_rms_mm", "static_share", "do_nothing", "moving_average", "removal")
+TRANSFER_FIGURES = ("dynamics_rms_mm", "static_share", "synthesis", "retarget", "delta_transfer", "retarget_to_delta_transfer")
 CONTEXT = ("command", "commit", "date", "machine", "load", "note", "source")
 NOT_FIGURES = {"id", "benchmark", "case", "obtained", "upper_bound", "table", "notes", *CONTEXT}
 
@@ -105,6 +109,7 @@ def testset_records(folder: Path) -> list[dict]:
             run = json.loads(path.read_text())
             flags = (f" --removal {run['removal']}" if run.get("removal") else "") + (f" --blend {run['blend']}" if run.get("blend") else "")
             flags += " --no-actor" if run.get("stabilized") == "without --actor" else ""
+            flags += f" --synthesis {run['synthesis']}" if run.get("synthesis") else ""
             records.append({
                 "benchmark": "testset", "id": f"testset-{path.stem}",
                 "case": f"{run['actor']} ({run['split']} actor), removal: {run.get('removal') or 'none'}, stabilized {run.get('stabilized', 'with --actor')}",
@@ -118,6 +123,8 @@ def testset_records(folder: Path) -> list[dict]:
                                        if run.get("removal") else "none: baselines only"),
                              "split": run["split"] + (": tuned on" if run["split"] == "validation" else ": run once, never used to choose")},
                 "table": {"columns": list(TESTSET_COLUMNS), "rows": [[take.get(c, "") for c in TESTSET_COLUMNS] for take in run["takes"]]},
+                **{f"{case['take']} ({case['expression_of']}'s expression, {case['motion_of']}'s skull): {key}": case[key]
+                   for case in run.get("transfers", []) for key in TRANSFER_FIGURES},
             })
         except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
             raise RecordError(f"{path}: not a testset_score.py run ({error})") from None

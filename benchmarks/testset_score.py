@@ -46,7 +46,7 @@ def commit() -> str:
 
 def main() -> None:
     from facedyn.usd.take import read_layers, read_take
-    from testset.score import dynamics_rms_mm, fraction_left, frame_rotation, load_truth, moving_average_estimate
+    from testset.score import dynamics_rms_mm, fraction_left, frame_rotation, load_truth, moving_average_estimate, static_share
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("actor", type=Path, help="an actor folder written by testset_generate.py")
@@ -89,7 +89,8 @@ def main() -> None:
                 stabilize_with_cli(args.actor / "takes" / name / "tracked.usdc", folder, None if args.no_actor else actor)
             stabilized, _ = read_take(folder / "take.usda")
             turn = frame_rotation(stabilized.points, truth) if args.no_actor else np.eye(3)  # estimates into the actor's frame
-            case = {"take": name, "frames": len(truth["dynamics"]), "dynamics_rms_mm": round(dynamics_rms_mm(truth), 3), "do_nothing": 1.0,
+            case = {"take": name, "frames": len(truth["dynamics"]), "dynamics_rms_mm": round(dynamics_rms_mm(truth), 3),
+                    "static_share": round(static_share(truth), 4), "do_nothing": 1.0,
                     "moving_average": round(fraction_left(moving_average_estimate(stabilized.points, truth) @ turn.T, truth), 4)}
             if args.removal is not None:
                 layer = folder / "quasistatic.usdc"
@@ -134,7 +135,7 @@ def score_transfer(recipe: dict, folder: Path, work: Path, model: Path) -> dict:
     the sources' take roots in `work` hold their quasistatic layers (the removal)."""
     from facedyn.evaluation import residual_fraction
     from facedyn.usd.take import read_layers
-    from testset.score import dynamics_rms_mm, fraction_left, load_truth
+    from testset.score import dynamics_rms_mm, fraction_left, load_truth, static_share
 
     expression_take, motion_take = recipe["sources"]
     truth = load_truth(folder, recipe["name"])
@@ -145,7 +146,7 @@ def score_transfer(recipe: dict, folder: Path, work: Path, model: Path) -> dict:
                 "retarget": ("retarget", str(target), "--source", str(source), "--model", str(model)),
                 "delta_transfer": ("retarget", str(target), "--source", str(source), "--method", "delta-transfer")}
     case = {"take": recipe["name"], "expression_of": expression_take, "motion_of": motion_take, "frames": len(truth["dynamics"]),
-            "dynamics_rms_mm": round(dynamics_rms_mm(truth), 3)}
+            "dynamics_rms_mm": round(dynamics_rms_mm(truth), 3), "static_share": round(static_share(truth), 4)}
     for name, command in commands.items():
         layer = out / f"{name}.usdc"
         usdfacedyn(*command, "-o", str(layer))

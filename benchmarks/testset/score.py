@@ -55,5 +55,15 @@ def moving_average_estimate(stabilized_points: np.ndarray, truth: dict) -> np.nd
     return estimate
 
 
+def static_share(truth: dict) -> float:
+    """RMS of the true dynamics' mean over the take / RMS of the true dynamics, over the scored
+    vertices: the part of the truth that does not move (tissue that settles elsewhere while the
+    head shakes). An estimate whose offsets average to zero over the take (a linear response to
+    the skull's acceleration does) cannot score below it."""
+    dynamics = np.asarray(truth["dynamics"], dtype=np.float64)[:, truth["face_vertices"]]
+    mean = dynamics.mean(axis=0)
+    return float(np.sqrt(np.sum(mean ** 2, axis=-1).mean() / np.sum(dynamics ** 2, axis=-1).mean()))
+
+
 def dynamics_rms_mm(truth: dict) -> float:
     return residual_fraction(truth["dynamics"], truth["dynamics"], truth["dynamics"], truth["face_vertices"])["dynamics_rms_cm"] * 10
