@@ -45,7 +45,8 @@ def commit() -> str:
 
 
 def main() -> None:
-    from facedyn.usd.take import read_layers, read_take
+    from facedyn.performance import QUASISTATIC
+    from facedyn.usd.take import read_layers, read_take_below
     from testset.score import dynamics_rms_mm, fraction_left, frame_rotation, load_truth, moving_average_estimate, static_share
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -87,7 +88,8 @@ def main() -> None:
             if not (folder / "take.usda").is_file():
                 folder.mkdir(parents=True, exist_ok=True)
                 stabilize_with_cli(args.actor / "takes" / name / "tracked.usdc", folder, None if args.no_actor else actor)
-            stabilized, _ = read_take(folder / "take.usda")
+            reload_layers(folder / "take.usda", folder / "quasistatic.usdc")
+            stabilized, _ = read_take_below(folder / "take.usda", QUASISTATIC)  # a rerun in --work finds the removal attached
             turn = frame_rotation(stabilized.points, truth) if args.no_actor else np.eye(3)  # estimates into the actor's frame
             case = {"take": name, "frames": len(truth["dynamics"]), "dynamics_rms_mm": round(dynamics_rms_mm(truth), 3),
                     "static_share": round(static_share(truth), 4), "do_nothing": 1.0,
@@ -96,6 +98,7 @@ def main() -> None:
                 layer = folder / "quasistatic.usdc"
                 usdfacedyn("remove", str(folder / "take.usda"), "-o", str(layer), "--attach", str(folder / "take.usda"),
                            "--model", str(args.removal), *(("--blend", str(args.blend)) if args.blend else ()))
+                reload_layers(layer, folder / "take.usda")
                 case["removal"] = round(fraction_left(read_layers([layer, folder / "take.usda"]).offsets @ turn.T, truth), 4)
             print(json.dumps(case), flush=True)
             run["takes"].append(case)
@@ -110,6 +113,18 @@ def main() -> None:
     path = args.results / f"{run['actor']}-{run['date'].replace(':', '').replace('+0000', 'Z')}.json"
     path.write_text(json.dumps(run, indent=1) + "\n")
     print(json.dumps({"written": str(path)}))
+
+
+def reload_layers(*paths: Path) -> None:
+    """Read again the layers this process has open that a command (another process) may have
+    rewritten since: USD keeps an opened layer for the process's life, and a rerun in --work
+    rewrites the removal and the take's root."""
+    from pxr import Sdf
+
+    for path in paths:
+        layer = Sdf.Layer.Find(str(path))
+        if layer is not None:
+            layer.Reload(force=True)
 
 
 def transfer_takes(folder: Path, actor: Path, tests: list[str]) -> list[dict]:
@@ -150,6 +165,7 @@ def score_transfer(recipe: dict, folder: Path, work: Path, model: Path) -> dict:
     for name, command in commands.items():
         layer = out / f"{name}.usdc"
         usdfacedyn(*command, "-o", str(layer))
+        reload_layers(layer, target)
         offsets = read_layers([layer, target]).offsets
         case[name] = round(fraction_left(offsets, truth), 4)
         case[f"{name}_rms_mm"] = round(residual_fraction(offsets, 0 * truth["dynamics"], truth["dynamics"], truth["face_vertices"])["residual_rms_cm"] * 10, 3)
