@@ -5,6 +5,7 @@ import fnmatch
 from pathlib import Path
 
 from facedyn.errors import UsageError
+from facedyn.performance import TAKE_ROOT_FILE
 from facedyn.processors.base import Parameter, check_device
 from facedyn.progress import Progress
 
@@ -149,7 +150,7 @@ def recorded_training_actor(inputs: list[Path]) -> Path | None:
 
     found = {}
     for root in take_roots(inputs):
-        actor = recorded_actor(root / "take.usda" if root.is_dir() else root)
+        actor = recorded_actor(root / TAKE_ROOT_FILE if root.is_dir() else root)
         if actor is not None:
             found.setdefault(actor, take_name(root))
     if len(found) > 1:
@@ -192,7 +193,7 @@ def read_truths(inputs: list[Path], names: list[str]) -> dict:
 
 
 def take_name(root: Path) -> str:
-    return root.name if root.is_dir() else root.parent.name if root.name in ("take.usda", "truth.usda") else root.stem
+    return root.name if root.is_dir() else root.parent.name if root.name in (TAKE_ROOT_FILE, "truth.usda") else root.stem
 
 
 def training_summary(model, takes, face, last: dict) -> dict:
