@@ -110,7 +110,7 @@ class Demo:
     def run_on(self, rig, corpus: Path) -> dict:
         """Every step after the corpus: a new performance through the pipeline, checked against its truth."""
         from facedyn.sim.corpus import TakeSpec, simulate_take
-        from facedyn.usd.corpus import write_simulated_take
+        from facedyn.usd.corpus_files import write_simulated_take
 
         spec = TakeSpec("performance", "walk", "smile", duration_s=self.settings["seconds"], seed=777, noise_cm=NOISE_CM)
         take_dir = self.output / "take"

@@ -81,7 +81,7 @@ def training_sequences(named: list[tuple[str, Path]], skull: str, truth: bool):
     from dataclasses import replace
 
     from facedyn.dynamics.training import TrainingSequence
-    from facedyn.usd.corpus import read_truth
+    from facedyn.usd.corpus_files import read_truth
     from facedyn.usd.training_data import read_training_take
 
     for name, root in named:
@@ -184,8 +184,8 @@ def epoch_reporter(progress: Progress, task: str, epochs: int):
 
 def read_truths(inputs: list[Path], names: list[str]) -> dict:
     """{take name: its truth Performance (points = true quasistatic, offsets = true dynamics)}
-    for simulated corpus takes (facedyn.usd.corpus keeps the truth beside each take)."""
-    from facedyn.usd.corpus import read_truth
+    for simulated corpus takes (facedyn.usd.corpus_files keeps the truth beside each take)."""
+    from facedyn.usd.corpus_files import read_truth
     from facedyn.usd.training_data import take_roots
 
     folders = {take_name(root): root if root.is_dir() else root.parent for root in take_roots(inputs)}

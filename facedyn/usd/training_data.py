@@ -2,7 +2,7 @@
 
 A stabilized take carries its solved skull (read below any removal attached to it: training
 reads the capture, not a quasistatic take). A simulated corpus take also has its true
-skull kept apart (facedyn.usd.corpus); training on it (`skull="truth"`) separates the
+skull kept apart (facedyn.usd.corpus_files); training on it (`skull="truth"`) separates the
 networks' accuracy from the stabilizer's.
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 from pxr import Sdf, Usd
 
 from facedyn.performance import CAPTURED, QUASISTATIC, TAKE_ROOT_FILE, Performance, role
-from facedyn.usd.corpus import CORPUS_INDEX, read_corpus_index
+from facedyn.usd.corpus_files import CORPUS_INDEX, read_corpus_index
 from facedyn.usd.errors import TakeError
 from facedyn.usd.take import TakeSource, find_face_mesh, read_stage, select_time_codes, stage_below
 from facedyn.usd.timing import Timing

@@ -26,7 +26,7 @@ from facedyn.dynamics.synthesis import synthesis_config, train_synthesis  # noqa
 from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal  # noqa: E402
 from facedyn.sim.corpus import TakeSpec, simulate_take  # noqa: E402
 from facedyn.sim.default_face import default_face  # noqa: E402
-from facedyn.usd.corpus import write_simulated_take  # noqa: E402
+from facedyn.usd.corpus_files import write_simulated_take  # noqa: E402
 from facedyn.usd.inspect import describe_take  # noqa: E402
 
 ALL_STEPS = "import,stabilize,remove,synthesize,preview"
