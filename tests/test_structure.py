@@ -10,7 +10,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "facedyn"
 PXR_ALLOWED = ("facedyn.usd", "facedyn.processors")
 # The only modules outside facedyn.sim that import it: the corpus writer (which `simulate` and `calibrate` build
 # corpora with), the corpus simulator on Dask and the demo. Whatever reads a corpus, a rig or a take does so without the physics.
-SIMULATOR_USERS = {"facedyn.processors.corpus_writer", "facedyn.batch.simulate", "facedyn.processors.demo"}
+SIMULATOR_USERS = {"facedyn.processors.corpus_writer", "facedyn.batch.cluster_corpus", "facedyn.processors.demo"}
 
 
 def _modules() -> dict[str, Path]:
@@ -67,6 +67,26 @@ def _declares_a_processor(path: Path) -> bool:
             if any(base == "Processor" or base.endswith("Processor") for base in bases):
                 return True
     return False
+
+
+# File names still shared, each pair for a reason outside this rule: facedyn/dynamics/ (retarget.py; its modelfile.py
+# imports facedyn.io.errors) and benchmarks/testset/ (imports facedyn.usd.rig) are being changed elsewhere, and a
+# processor module is named after its command (its entry point in setup.cfg). The list may only shrink.
+SHARED_FILE_NAMES = {
+    "errors.py": {"facedyn.errors", "facedyn.io.errors", "facedyn.usd.errors"},
+    "retarget.py": {"facedyn.dynamics.retarget", "facedyn.processors.retarget"},
+    "rig.py": {"facedyn.rig", "facedyn.usd.rig"},
+}
+
+
+def test_no_two_modules_share_a_file_name():
+    """A module's file name says which one it is (issue 38 found three corpus.py): `corpus_files`, not another `corpus`."""
+    by_file: dict[str, set[str]] = {}
+    for name, path in _modules().items():
+        if path.name != "__init__.py":
+            by_file.setdefault(path.name, set()).add(name)
+    shared = {file: names for file, names in by_file.items() if len(names) > 1}
+    assert shared == SHARED_FILE_NAMES
 
 
 def test_no_import_loops():

@@ -1,7 +1,7 @@
 """The corpus writer: simulate a protocol's takes and write them as a corpus folder (facedyn.usd.corpus_files), resuming.
 
 The one place outside the simulator where takes are simulated for a corpus: `simulate`,
-`calibrate`'s first stage, the demo and `batch`'s Dask corpus (facedyn.batch.simulate) build
+`calibrate`'s first stage, the demo and `batch`'s Dask corpus (facedyn.batch.cluster_corpus) build
 theirs here, so the corpus's files (facedyn.usd.corpus_files) and everything that reads them stay
 free of the simulator.
 """

@@ -86,7 +86,7 @@ class ImportProcessor(Processor):
         output = capture.output(progress)
         output.root = root
         if request.params["actor"] is not None:
-            from facedyn.usd.actor import read_actor_for
+            from facedyn.usd.actor_asset import read_actor_for
 
             read_actor_for(request.params["actor"], output.layer.topology, source.paths[0])
             output.actor = request.params["actor"]

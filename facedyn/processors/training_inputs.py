@@ -126,7 +126,7 @@ def training_face(inputs: list[Path], params: dict, takes: list):
     so a model does not depend on which take is listed first. Else the first take's own.
     """
     from facedyn.dynamics.face import FaceSetup
-    from facedyn.usd.actor import read_actor_for
+    from facedyn.usd.actor_asset import read_actor_for
     from facedyn.usd.errors import TakeError
 
     frame = training_skull_frame(takes)

@@ -9,7 +9,7 @@ from facedyn.usd.plugin import register_plugins as _register_plugins
 _register_plugins()
 
 _PUBLIC = {
-    "read_actor_for": "actor", "write_actor": "actor",
+    "read_actor_for": "actor_asset", "write_actor": "actor_asset",
     "read_corpus_index": "corpus_files", "read_truth": "corpus_files", "write_simulated_take": "corpus_files",
     "TakeError": "errors",
     "TakeFrames": "frames",

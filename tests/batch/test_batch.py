@@ -17,7 +17,7 @@ pytest.importorskip("distributed")
 
 from facedyn.batch.cluster import open_client, run_steps  # noqa: E402
 from facedyn.batch.command import add_batch_arguments, run_batch  # noqa: E402
-from facedyn.batch.simulate import build_corpus_on  # noqa: E402
+from facedyn.batch.cluster_corpus import build_corpus_on  # noqa: E402
 from facedyn.batch.plan import Models, plan_batch  # noqa: E402
 from facedyn.batch.state import STATE_FILE, file_checksum  # noqa: E402
 from facedyn.dynamics.face import FaceSetup  # noqa: E402
