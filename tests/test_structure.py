@@ -136,10 +136,19 @@ def test_only_the_corpus_simulator_the_writer_and_the_demo_import_the_simulator(
 
 
 def test_no_processor_module_imports_another():
-    graph, processors = _graph(), _processor_modules()
-    assert len(processors) > 10 and all(name in graph for name in processors), sorted(processors - set(graph))
+    """A processor module (registered, or declaring a Processor class) imports none of the others, even inside a function."""
+    graph, modules, registered = _graph(), _modules(), _processor_modules()
+    assert len(registered) > 10 and all(name in graph for name in registered), sorted(registered - set(graph))
+    processors = registered | {name for name, path in modules.items() if name.startswith("facedyn.") and _declares_a_processor(path)}
     arrows = sorted((name, other) for name in processors for other in graph[name] if other in processors and other != name)
     assert arrows == []
+
+
+def test_the_import_check_sees_imports_inside_functions(tmp_path):
+    source = tmp_path / "step.py"
+    source.write_text("def run():\n    from facedyn.processors import remove\n    import facedyn.processors.stabilize as s\n"
+                      "    from facedyn.processors.model_steps import REMOVES\n")
+    assert _imports(source, _modules()) == {"facedyn.processors.remove", "facedyn.processors.stabilize", "facedyn.processors.model_steps"}
 
 
 def test_library_modules_of_the_processors_declare_no_processor():
