@@ -79,6 +79,7 @@ class StepPlan:
     output: Path
     argv: tuple[str, ...]  # usdfacedyn's arguments
     inputs: tuple[Path, ...]  # files beside the take whose checksums say whether the step is current
+    reads_capture: bool = False  # the step reads the capture (inputs[0]) and makes the take root
 
     @property
     def root(self) -> Path:
@@ -190,13 +191,14 @@ def plan_take(name: str, capture: Path, output: Path, steps: tuple[str, ...], mo
                 inputs.append(Path(value))
             if option.labels:
                 label = motion_label(value)
-        source = root
-        if processor.reads.what == "sources":  # the step that reads the capture (and makes the take root the later steps attach to)
-            source, inputs = str(capture), [capture, *inputs]
+        reads_capture = processor.reads.what == "sources"  # (import) it makes the take root the later steps attach to
+        source = str(capture) if reads_capture else root
+        if reads_capture:
+            inputs.insert(0, capture)
         out = folder / layer_name(step, label)
         attach = [ATTACH_FLAG, root] if processor.writes.attach else []
         argv = (step, source, *extra, OUTPUT_FLAG, str(out), *attach, QUIET_FLAG)
-        plans.append(StepPlan(name, step, folder, out, argv, tuple(Path(p).absolute() for p in inputs)))
+        plans.append(StepPlan(name, step, folder, out, argv, tuple(Path(p).absolute() for p in inputs), reads_capture))
     return plans
 
 
