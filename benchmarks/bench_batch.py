@@ -27,7 +27,7 @@ from facedyn.dynamics.modelfile import save_model
 from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
-from facedyn.usd.corpus import write_simulated_take
+from facedyn.usd.corpus_files import write_simulated_take
 
 STEPS = ("import", "stabilize", "remove", "preview")
 

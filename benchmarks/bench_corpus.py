@@ -76,7 +76,7 @@ def measure(record: Recorder, args) -> None:
 def write_and_render(record: Recorder, rig, take, out: Path) -> None:
     from facedyn.preview.images import write_image
     from facedyn.preview.review import review_sheet
-    from facedyn.usd.corpus import write_simulated_take
+    from facedyn.usd.corpus_files import write_simulated_take
 
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()

@@ -91,7 +91,7 @@ def write_capture(take_folder: Path, base: Path, frames: int, chunk: int = 1024)
     from facedyn.processors.motion_source import skull_motion
     from facedyn.geometry import quaternion
     from facedyn.usd import layers, schema
-    from facedyn.usd.corpus import read_truth
+    from facedyn.usd.corpus_files import read_truth
     from facedyn.usd.take import read_take
 
     capture, source = read_take(base / "capture.usdc")

@@ -88,7 +88,7 @@ def write_still_take(folder: Path, rig, skull_points, translate, orient, root_na
     """A stabilized take of `skull_points` under the skull (translate, orient), no dynamics,
     written as the simulator writes one, with its root `root_name` listing skull and capture."""
     from facedyn.sim.corpus import SimulatedPerformance, TakeSpec
-    from facedyn.usd.corpus import write_simulated_take
+    from facedyn.usd.corpus_files import write_simulated_take
     from facedyn.usd.layers import write_take_root
     from facedyn.usd.timing import Timing
 

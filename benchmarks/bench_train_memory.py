@@ -49,7 +49,7 @@ class LazyTruth(Mapping):
         self.folders = folders
 
     def __getitem__(self, name):
-        from facedyn.usd.corpus import read_truth
+        from facedyn.usd.corpus_files import read_truth
 
         return read_truth(self.folders[name]).points
 
@@ -68,7 +68,7 @@ def child(corpus: Path, count: int, network: str, resident_mib: int, epochs: int
     from facedyn.dynamics.skull_motion import SkullMotionInput
     from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
     from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
-    from facedyn.usd.corpus import read_truth
+    from facedyn.usd.corpus_files import read_truth
     from facedyn.usd.training_data import read_training_take, take_roots
 
     roots = take_roots([corpus])[:count]

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from facedyn.evaluation import stabilization_errors
-from facedyn.usd.corpus import read_truth
+from facedyn.usd.corpus_files import read_truth
 from facedyn.usd.take import read_layers
 
 work, take = Path(sys.argv[1]), Path(sys.argv[2])

@@ -42,6 +42,16 @@ class Role:
     variants: bool = False  # several layers of this role may coexist
     face_role: bool = True  # False: an overlay (e.g. heat maps) that leaves the face's role alone
     reads: str | None = None  # the role that must lie below a layer of this role (what it is computed from)
+    file: str | None = None  # the file a take folder keeps a layer of this role in (default: <name>.usdc)
+
+    def layer_file(self, label: str = "") -> str:
+        """The file name of a layer of this role in a take folder; a labelled variant (a synthesis
+        on the hop motion) puts its label after the first part: synthesized.hop.usdc, take.hop.preview.usdc."""
+        name = self.file or f"{self.name}.usdc"
+        if not label:
+            return name
+        first, _, rest = name.partition(".")
+        return f"{first}.{label}.{rest}"
 
 
 CAPTURED, STABILIZED, QUASISTATIC = "captured", "stabilized", "quasistatic"
@@ -49,13 +59,15 @@ SYNTHESIZED, RETARGETED, PREVIEW = "synthesized", "retargeted", "preview"
 """The built-in roles' names: code names a role through these constants, never a bare string."""
 
 BUILTIN_ROLES = (
-    Role(CAPTURED, 0, "capture"),  # the base role: the capture every other layer is computed over; it sets the take's frames
+    Role(CAPTURED, 0, "capture", file="capture.usdc"),  # the base role: the capture every other layer is computed over; it sets the take's frames
     Role(STABILIZED, 10, "stabilized layers", reads=CAPTURED),
     Role(QUASISTATIC, 20, "quasistatic layers", reads=STABILIZED),
     Role(SYNTHESIZED, 30, "synthesized layers", variants=True, reads=QUASISTATIC),
     Role(RETARGETED, 30, "retargeted layers", variants=True, reads=QUASISTATIC),
-    Role(PREVIEW, 40, "heat map", variants=True, face_role=False),
+    Role(PREVIEW, 40, "heat map", variants=True, face_role=False, file="take.preview.usdc"),  # preview wants *.preview.usdc
 )
+TAKE_ROOT_FILE = "take.usda"
+"""The root layer a take folder is opened by (its subLayers are the layers above, by role)."""
 ROLE_GROUP = "facedyn.roles"
 """Entry-point group through which third parties add roles (each entry point a `Role`)."""
 
@@ -150,7 +162,7 @@ class Performance:
     landmarks: np.ndarray | None = None  # (L, 3) skull-space skull landmarks
     offsets: np.ndarray | None = None  # (F, N, 3) float32 dynamics offsets (skull space)
     solve_error: np.ndarray | None = None  # (F,) float32 per-frame stabilization error
-    role: str = "captured"
+    role: str = CAPTURED
     meters_per_unit: float = 0.01
     up_axis: str = "Y"
     metadata: dict = field(default_factory=dict)

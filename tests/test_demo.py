@@ -14,7 +14,7 @@ from facedyn.dynamics.modelfile import load_model
 from facedyn.dynamics.removal import SAMPLE_POSITIONS
 from facedyn.dynamics.skull_motion import NAMED
 from facedyn.processors.training_inputs import take_skull_frame
-from facedyn.usd.actor import read_actor
+from facedyn.usd.actor_asset import read_actor
 from facedyn.usd.take import read_take
 
 pytestmark = pytest.mark.slow  # trains F and H and runs the whole demo

@@ -4,7 +4,7 @@ A batch runs facedyn's own commands (import, stabilize, remove, synthesize, prev
 many captures, one Dask task per (take, step) chained along the steps, on an embedded local
 cluster or an existing one (facedyn.batch.cluster). Each step is skipped when its output
 and provenance say it is already done (facedyn.batch.state), so a batch is resumable; a
-failing take is reported and the others go on. facedyn.batch.simulate builds a simulated
+failing take is reported and the others go on. facedyn.batch.cluster_corpus builds a simulated
 corpus with one task per take. Nothing here imports pxr: the steps go through the CLI.
 
 On a render farm, start the workers through the farm's scheduler with dask-jobqueue

@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from facedyn.batch.plan import STEPS, Models, parse_steps, plan_batch
+from facedyn.batch.plan import STEP_OPTIONS, STEPS, Models, parse_steps, plan_batch
 from facedyn.errors import UsageError
 
 EXIT_OK, EXIT_FAILURE = 0, 1
@@ -28,12 +28,10 @@ def add_batch_arguments(parser) -> None:
     parser.add_argument("captures", nargs="+", metavar="CAPTURE", help="mesh caches, glob patterns, or shot lists (.txt: one path per line)")
     parser.add_argument("-o", "--output", type=Path, required=True, metavar="OUTDIR", help="folder of the takes (OUTDIR/<name>/take.usda)")
     parser.add_argument("--steps", default=",".join(STEPS), help=f"comma-separated steps, in order (default: {','.join(STEPS)})")
-    parser.add_argument("--actor", metavar="A", help="an actor asset (usdfacedyn actor): stabilize puts every take in its skull frame")
-    parser.add_argument("--removal-model", type=Path, metavar="F", help="removal model for the remove step (its --model): network F, "
-                        "an actor's linear response, a blend, or `default` (the shipped person-independent one)")
-    parser.add_argument("--model", type=Path, metavar="F", help="deprecated alias of --removal-model")
-    parser.add_argument("--synthesis-model", type=Path, metavar="H", help="synthesis model for the synthesize step")
-    parser.add_argument("--skull-motion", metavar="M", help="new skull motion for synthesize: BVH, stabilized take, or walk|run|hop|still|platform:9hz")
+    for option in STEP_OPTIONS:  # each a step's parameter (facedyn.batch.plan)
+        parser.add_argument(option.flag, dest=option.field, metavar=option.metavar, help=option.help)
+        if option.alias:
+            parser.add_argument(option.alias, dest=f"{option.field}_alias", metavar=option.metavar, help=f"deprecated alias of {option.flag}")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, metavar="N", help="worker processes of the embedded local cluster (default: one per core)")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
@@ -43,20 +41,25 @@ def add_batch_arguments(parser) -> None:
 
 
 def models_from(args) -> Models:
+    """The steps' models and motions from batch's options; a removal model's shipped name (default) as its file."""
     from facedyn.models import resolve_model
 
-    removal = args.removal_model
-    if args.model is not None:
-        if removal is not None:
-            raise UsageError("--model is the old name of --removal-model: give one of them")
-        print("usdfacedyn: batch --model is deprecated and will be removed; use --removal-model (the same model)", file=sys.stderr)
-        removal = args.model
-    return Models(
-        removal=resolve_model(removal) if removal else None,  # a shipped model's name (default) as its file
-        synthesis=Path(args.synthesis_model) if args.synthesis_model else None,
-        skull_motion=args.skull_motion,
-        actor=Path(args.actor) if args.actor else None,
-    )
+    given = {}
+    for option in STEP_OPTIONS:
+        value = getattr(args, option.field)
+        if option.alias and getattr(args, f"{option.field}_alias") is not None:
+            if value is not None:
+                raise UsageError(f"{option.alias} is the old name of {option.flag}: give one of them")
+            print(f"usdfacedyn: batch {option.alias} is deprecated and will be removed; use {option.flag} (the same model)", file=sys.stderr)
+            value = getattr(args, f"{option.field}_alias")
+        if not value:
+            value = None
+        elif option.shipped:
+            value = resolve_model(value)  # a shipped model's name (default) as its file
+        elif option.file:
+            value = Path(value)
+        given[option.field] = value
+    return Models(**given)
 
 
 def run_batch(args) -> int:

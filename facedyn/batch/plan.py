@@ -2,8 +2,10 @@
 
 The steps are processors, and their command lines are built from the processors'
 declarations (facedyn.processors.base): each step's order is its role's rank, its layer is
-named after its role, and every flag it is given is one it declares, so a processor's flag
-renamed or dropped is an error here, not a batch that runs with the wrong flags.
+named after its role (the role table's file names), the capture goes to the step that reads
+sources, and every flag it is given is one it declares: batch's own options are steps'
+parameters (`STEP_OPTIONS`), each given to the step that writes a role, so a processor's
+flag renamed or dropped is an error here, not a batch that runs with the wrong flags.
 """
 from __future__ import annotations
 
@@ -11,20 +13,55 @@ import glob
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from facedyn.errors import FacedynError, UsageError
 from facedyn.io.errors import InputError
 from facedyn.io.files import check_not_special, read_lines
-from facedyn.performance import CAPTURED, PREVIEW, SYNTHESIZED, role
+from facedyn.performance import QUASISTATIC, STABILIZED, SYNTHESIZED, TAKE_ROOT_FILE, role
+from facedyn.processors.commandline import ATTACH_FLAG, OUTPUT_FLAG, QUIET_FLAG
 
-STEPS = ("import", "stabilize", "remove", "synthesize", "preview")  # the layer processors a capture goes through
+if TYPE_CHECKING:
+    from facedyn.processors.base import Parameter
+
+STEPS = ("import", "stabilize", "remove", "synthesize", "preview")  # the layer processors a capture can go through, in role rank order
 SHOT_LIST_SUFFIXES = (".txt", ".list")
-LAYER_NAMES = {CAPTURED: "capture.usdc", PREVIEW: "take.preview.usdc"}  # else <role>.usdc (a variant: <role>.<label>usdc)
+
+
+@dataclass(frozen=True)
+class StepOption:
+    """A batch option that is one step's declared parameter: given as `parameter` to the step that writes `role`.
+
+    Declared here, not read from the processors, because `usdfacedyn`'s parser is built on
+    every start and must not import the processors' modules."""
+
+    field: str  # its Models field
+    flag: str  # batch's flag
+    role: str  # the role the step it is given to writes
+    parameter: str  # that step's parameter
+    metavar: str
+    help: str
+    file: bool = True  # its value is a path (else a name, or a path when such a file exists: a skull motion)
+    needs: str = ""  # what the step lacks when its parameter is required and the option is not given
+    labels: bool = False  # its value names the variant the step writes (synthesized.hop.usdc)
+    shipped: bool = False  # its value may name a model shipped with facedyn (facedyn.models: default)
+    alias: str | None = None  # the flag's deprecated old spelling
+
+
+STEP_OPTIONS = (
+    StepOption("actor", "--actor", STABILIZED, "actor", "A", "an actor asset (usdfacedyn actor): stabilize puts every take in its skull frame"),
+    StepOption("removal", "--removal-model", QUASISTATIC, "model", "F", "removal model for the remove step (its --model): network F, "
+               "an actor's linear response, a blend, or `default` (the shipped person-independent one)", needs="a removal model", shipped=True,
+               alias="--model"),
+    StepOption("synthesis", "--synthesis-model", SYNTHESIZED, "model", "H", "synthesis model for the synthesize step", needs="a synthesis model"),
+    StepOption("skull_motion", "--skull-motion", SYNTHESIZED, "skull_motion", "M",
+               "new skull motion for synthesize: BVH, stabilized take, or walk|run|hop|still|platform:9hz", file=False, labels=True),
+)
 
 
 @dataclass(frozen=True)
 class Models:
-    """What the steps read besides the take: F, H and the new skull motion."""
+    """What the steps read besides the take: F, H and the new skull motion (STEP_OPTIONS say which step reads which)."""
 
     removal: Path | None = None
     synthesis: Path | None = None
@@ -42,10 +79,11 @@ class StepPlan:
     output: Path
     argv: tuple[str, ...]  # usdfacedyn's arguments
     inputs: tuple[Path, ...]  # files beside the take whose checksums say whether the step is current
+    reads_capture: bool = False  # the step reads the capture (inputs[0]) and makes the take root
 
     @property
     def root(self) -> Path:
-        return self.folder / "take.usda"
+        return self.folder / TAKE_ROOT_FILE
 
 
 @lru_cache(maxsize=None)
@@ -73,9 +111,18 @@ def flag(step: str, parameter: str) -> str:
 
 
 def layer_name(step: str, label: str = "") -> str:
-    """The file a step's layer is written to: named after the role its processor writes."""
-    written = declaration(step).writes.role
-    return LAYER_NAMES.get(written) or f"{written}.{label}usdc"
+    """The file a step's layer is written to: the role table's file for the role its processor writes."""
+    return role(declaration(step).writes.role).layer_file(label)
+
+
+def options_of(step: str) -> tuple[tuple[StepOption, Parameter], ...]:
+    """(option, the step's declared parameter it is given as) for each batch option the step takes."""
+    processor = declaration(step)
+    declared = {p.name: p for p in processor.parameters}
+    options = tuple(option for option in STEP_OPTIONS if option.role == processor.writes.role)
+    for option in options:
+        flag(step, option.parameter)  # a FacedynError if the processor no longer declares it
+    return tuple((option, declared[option.parameter]) for option in options)
 
 
 def parse_steps(text: str) -> tuple[str, ...]:
@@ -128,48 +175,49 @@ def take_names(captures: list[Path]) -> list[str]:
 def plan_take(name: str, capture: Path, output: Path, steps: tuple[str, ...], models: Models) -> list[StepPlan]:
     """The take's steps in order."""
     folder = Path(output).absolute() / name
-    root = str(folder / "take.usda")
+    root = str(folder / TAKE_ROOT_FILE)
     plans = []
     for step in steps:
+        processor = declaration(step)
         extra: list[str] = []
         inputs: list[Path] = []
-        writes = declaration(step).writes
-        attach = ["--attach", root] if writes.attach else []  # import makes the take root the later steps attach to
-        out, source = folder / layer_name(step, motion_label(models.skull_motion) if writes.role == SYNTHESIZED else ""), root
-        if writes.role == CAPTURED:  # the step that reads the capture
-            source, inputs = str(capture), [capture]
-        elif step == "stabilize" and models.actor is not None:
-            extra, inputs = [flag(step, "actor"), str(models.actor)], [models.actor]
-        elif step == "remove":
-            extra, inputs = [flag(step, "model"), str(models.removal)], [models.removal]
-        elif step == "synthesize":
-            extra, inputs = [flag(step, "model"), str(models.synthesis)], [models.synthesis]
-            if models.skull_motion:
-                extra += [flag(step, "skull_motion"), models.skull_motion]
-                if Path(models.skull_motion).is_file():
-                    inputs.append(Path(models.skull_motion))
-        argv = (step, source, *extra, "-o", str(out), *attach, "-q")
-        plans.append(StepPlan(name, step, folder, out, argv, tuple(Path(p).absolute() for p in inputs)))
+        label = ""
+        for option, parameter in options_of(step):
+            value = getattr(models, option.field)
+            if value is None or value == "":
+                continue
+            extra += [parameter.flag, str(value)]
+            if parameter.type is Path or Path(value).is_file():  # a file the step reads: its checksum says whether it is current
+                inputs.append(Path(value))
+            if option.labels:
+                label = motion_label(value)
+        reads_capture = processor.reads.what == "sources"  # (import) it makes the take root the later steps attach to
+        source = str(capture) if reads_capture else root
+        if reads_capture:
+            inputs.insert(0, capture)
+        out = folder / layer_name(step, label)
+        attach = [ATTACH_FLAG, root] if processor.writes.attach else []
+        argv = (step, source, *extra, OUTPUT_FLAG, str(out), *attach, QUIET_FLAG)
+        plans.append(StepPlan(name, step, folder, out, argv, tuple(Path(p).absolute() for p in inputs), reads_capture))
     return plans
 
 
 def motion_label(skull_motion: str | None) -> str:
-    """'walk.bvh' -> 'walk.', 'platform:9hz' -> 'platform9hz.', none (the take's own) -> ''."""
+    """'walk.bvh' -> 'walk', 'platform:9hz' -> 'platform9hz', none (the take's own) -> ''."""
     if not skull_motion:
         return ""
     label = Path(skull_motion).stem if Path(skull_motion).suffix else skull_motion
-    return "".join(ch for ch in label if ch.isalnum() or ch in "_-") + "."
+    return "".join(ch for ch in label if ch.isalnum() or ch in "_-")
 
 
 def plan_batch(captures: list[str], output: Path, steps: tuple[str, ...], models: Models) -> list[list[StepPlan]]:
     """Every take's steps; the models the steps need must be given."""
-    for name, path in (("--removal-model", models.removal), ("--synthesis-model", models.synthesis), ("--actor", models.actor),
-                       ("--skull-motion", models.skull_motion)):
-        if path is not None:
-            check_not_special(path, name)
-    if "remove" in steps and models.removal is None:
-        raise UsageError("the remove step needs a removal model (--removal-model)")
-    if "synthesize" in steps and models.synthesis is None:
-        raise UsageError("the synthesize step needs a synthesis model (--synthesis-model)")
+    for option in STEP_OPTIONS:
+        if getattr(models, option.field) is not None:
+            check_not_special(getattr(models, option.field), option.flag)
+    for step in steps:
+        for option, parameter in options_of(step):
+            if parameter.required and getattr(models, option.field) is None:
+                raise UsageError(f"the {step} step needs {option.needs} ({option.flag})")
     found = find_captures(captures)
     return [plan_take(name, capture, output, steps, models) for name, capture in zip(take_names(found), found)]

@@ -49,11 +49,11 @@ def read_state(folder: Path) -> dict:
 
 
 def record_step(plan: StepPlan, key: str, checksums: dict[str, str], seconds: float) -> None:
-    """Write the step's key (and, for import, the capture's checksum) into the state file, atomically."""
+    """Write the step's key (and, for the step that reads the capture, its checksum) into the state file, atomically."""
     state = read_state(plan.folder)
     state["steps"][plan.step] = {"key": key, "output": plan.output.name, "argv": list(plan.argv), "seconds": round(seconds, 3),
                                  "facedyn": facedyn.__version__}
-    if plan.step == "import":
+    if plan.reads_capture:
         capture = str(plan.inputs[0])
         state["capture"] = {"path": capture, "sha256": checksums[capture]}
     fd, tmp = tempfile.mkstemp(prefix=".batch.", suffix=".json", dir=plan.folder)

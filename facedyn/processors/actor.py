@@ -55,7 +55,7 @@ class ActorProcessor(Processor):
         return Plan(description, actor)
 
     def run(self, plan: Plan, progress: Progress) -> FileOutput:
-        from facedyn.usd.actor import write_actor
+        from facedyn.usd.actor_asset import write_actor
 
         actor = plan.state
         return FileOutput(partial(write_actor, actor=actor), {**plan.description, "skull_frame": actor.skull_frame})

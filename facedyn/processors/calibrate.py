@@ -44,6 +44,7 @@ from pathlib import Path
 
 from facedyn.errors import UsageError
 from facedyn.io.files import write_atomically
+from facedyn.performance import TAKE_ROOT_FILE
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.processors.epoch_clock import EpochClock
 from facedyn.progress import Progress
@@ -97,7 +98,7 @@ class CalibrateProcessor(Processor):
         params = request.params
         if len(request.inputs) < 2:
             raise UsageError("give the session's take roots, at least two: the response is chosen by leaving each take out")
-        roots = [root / "take.usda" if root.is_dir() else root for root in take_roots(request.inputs)]
+        roots = [root / TAKE_ROOT_FILE if root.is_dir() else root for root in take_roots(request.inputs)]
         if not params["rig"].is_file():
             raise UsageError(f"--rig {params['rig']}: no such file")
         rig = read_blendshape_rig(params["rig"])

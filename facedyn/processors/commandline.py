@@ -18,6 +18,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+OUTPUT_FLAG, ATTACH_FLAG, QUIET_FLAG = "-o", "--attach", "-q"  # every processor's (batch writes its steps' command lines with them)
 
 
 class Parser(argparse.ArgumentParser):
@@ -156,15 +157,15 @@ def add_processor_parser(commands, processor) -> None:
     if reads.what != "nothing":
         p.add_argument("inputs", nargs="+" if reads.many else None, type=Path, metavar=reads.metavar, help=reads.help or None)
     output_help = writes.help + (f" (default: {writes.default})" if writes.default else "")
-    p.add_argument("-o", "--output", type=Path, required=writes.default is None, default=writes.default and Path(writes.default),
+    p.add_argument(OUTPUT_FLAG, "--output", type=Path, required=writes.default is None, default=writes.default and Path(writes.default),
                    metavar=writes.metavar, help=output_help)
     if writes.what == "layer" and writes.attach:
-        p.add_argument("--attach", type=Path, metavar="ROOT", help="place the output in ROOT's subLayers by its role")
+        p.add_argument(ATTACH_FLAG, type=Path, metavar="ROOT", help="place the output in ROOT's subLayers by its role")
     if writes.what == "layer" or reads.frame_range:
         p.add_argument("--frames", type=_frame_range, metavar="FIRST:LAST", help="only these frames (inclusive time codes)")
     p.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE", help="set a parameter by name")
     p.add_argument("--dry-run", action="store_true", help="read and check the inputs and parameters, write nothing")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    p.add_argument(QUIET_FLAG, "--quiet", action="store_true", help="no progress output")
     common_flags(p)
     options = p.add_argument_group(f"{processor.name} parameters (also -p KEY=VALUE)")
     for param in processor.parameters:

@@ -1,8 +1,8 @@
-"""The corpus writer: simulate a protocol's takes and write them as a corpus folder (facedyn.usd.corpus), resuming.
+"""The corpus writer: simulate a protocol's takes and write them as a corpus folder (facedyn.usd.corpus_files), resuming.
 
 The one place outside the simulator where takes are simulated for a corpus: `simulate`,
-`calibrate`'s first stage, the demo and `batch`'s Dask corpus (facedyn.batch.simulate) build
-theirs here, so the corpus's files (facedyn.usd.corpus) and everything that reads them stay
+`calibrate`'s first stage, the demo and `batch`'s Dask corpus (facedyn.batch.cluster_corpus) build
+theirs here, so the corpus's files (facedyn.usd.corpus_files) and everything that reads them stay
 free of the simulator.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ from facedyn.progress import Progress
 from facedyn.rig import FaceRig
 from facedyn.sim.corpus import TakeSpec, check_data_folder, protocol, simulate_each, takes_matching
 from facedyn.sim.tissue import TissueParams
-from facedyn.usd.corpus import (complete_take, corpus_folder, rig_fingerprint, sweep_partial_takes, take_recipe, write_corpus_index,
+from facedyn.usd.corpus_files import (complete_take, corpus_folder, rig_fingerprint, sweep_partial_takes, take_recipe, write_corpus_index,
                                 write_take_atomically)
 
 

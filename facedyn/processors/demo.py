@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 import facedyn
+from facedyn.performance import CAPTURED, TAKE_ROOT_FILE, role
 from facedyn.processors.base import FolderOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.progress import Progress
 
@@ -109,13 +110,13 @@ class Demo:
     def run_on(self, rig, corpus: Path) -> dict:
         """Every step after the corpus: a new performance through the pipeline, checked against its truth."""
         from facedyn.sim.corpus import TakeSpec, simulate_take
-        from facedyn.usd.corpus import write_simulated_take
+        from facedyn.usd.corpus_files import write_simulated_take
 
         spec = TakeSpec("performance", "walk", "smile", duration_s=self.settings["seconds"], seed=777, noise_cm=NOISE_CM)
         take_dir = self.output / "take"
         truth = self.step("simulate a new performance", lambda: simulate_take(rig, spec))
         write_simulated_take(take_dir, truth, rig)
-        root = take_dir / "take.usda"
+        root = take_dir / TAKE_ROOT_FILE
         actor = self.step("make the actor from the rig", lambda: self.make_actor(rig))
         self.stabilize(root, take_dir, truth, rig, actor)
         models = self.output / "models"
@@ -154,7 +155,7 @@ class Demo:
         true_skull = truth.quasistatic + truth.offsets
         errors = {}
         for name, layer in (("mode pursuit", take_dir / "stabilized.usdc"), ("three-point", scratch / "three_point.usdc")):
-            solved = _compose(layer, take_dir / "capture.usdc")
+            solved = _compose(layer, take_dir / role(CAPTURED).layer_file())
             errors[name] = stabilization_errors(*solved.skull(), truth.skull_translate, truth.skull_orient, true_skull,
                                                 rig.face_vertices)
         self.results["stabilize"] = errors

@@ -31,7 +31,7 @@ import numpy as np
 
 from facedyn.errors import UsageError
 from facedyn.io.resample import CubicResampler, SplineWindow
-from facedyn.performance import CAPTURED
+from facedyn.performance import CAPTURED, TAKE_ROOT_FILE
 from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.progress import Progress
 
@@ -59,7 +59,7 @@ class ImportProcessor(Processor):
     def take_root(self, request: Request) -> Path:
         """The take root this import creates or extends."""
         root = request.params["root"]
-        return Path(root) if root else request.output.parent / "take.usda"
+        return Path(root) if root else request.output.parent / TAKE_ROOT_FILE
 
     def prepare(self, request: Request) -> Plan:
         from facedyn.io.obj import ObjFrames
@@ -86,7 +86,7 @@ class ImportProcessor(Processor):
         output = capture.output(progress)
         output.root = root
         if request.params["actor"] is not None:
-            from facedyn.usd.actor import read_actor_for
+            from facedyn.usd.actor_asset import read_actor_for
 
             read_actor_for(request.params["actor"], output.layer.topology, source.paths[0])
             output.actor = request.params["actor"]

@@ -262,7 +262,7 @@ def with_actor(perf, actor_path: Path, take: Path, params: dict):
     frame, kept as the rest) and its rigid weights (all vertices with --mask all), which the take's own data still
     checks (facedyn.stabilize.rigidity). Same topology required."""
     from facedyn.stabilize.rigidity import RigidModel
-    from facedyn.usd.actor import read_actor_for
+    from facedyn.usd.actor_asset import read_actor_for
 
     if params["rest"] == "estimate":
         raise UsageError("an actor fixes the rest mesh (its neutral defines the skull frame); leave out --rest estimate")

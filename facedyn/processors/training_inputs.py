@@ -5,6 +5,7 @@ import fnmatch
 from pathlib import Path
 
 from facedyn.errors import UsageError
+from facedyn.performance import TAKE_ROOT_FILE
 from facedyn.processors.base import Parameter, check_device
 from facedyn.progress import Progress
 
@@ -80,7 +81,7 @@ def training_sequences(named: list[tuple[str, Path]], skull: str, truth: bool):
     from dataclasses import replace
 
     from facedyn.dynamics.training import TrainingSequence
-    from facedyn.usd.corpus import read_truth
+    from facedyn.usd.corpus_files import read_truth
     from facedyn.usd.training_data import read_training_take
 
     for name, root in named:
@@ -125,7 +126,7 @@ def training_face(inputs: list[Path], params: dict, takes: list):
     so a model does not depend on which take is listed first. Else the first take's own.
     """
     from facedyn.dynamics.face import FaceSetup
-    from facedyn.usd.actor import read_actor_for
+    from facedyn.usd.actor_asset import read_actor_for
     from facedyn.usd.errors import TakeError
 
     frame = training_skull_frame(takes)
@@ -149,7 +150,7 @@ def recorded_training_actor(inputs: list[Path]) -> Path | None:
 
     found = {}
     for root in take_roots(inputs):
-        actor = recorded_actor(root / "take.usda" if root.is_dir() else root)
+        actor = recorded_actor(root / TAKE_ROOT_FILE if root.is_dir() else root)
         if actor is not None:
             found.setdefault(actor, take_name(root))
     if len(found) > 1:
@@ -183,8 +184,8 @@ def epoch_reporter(progress: Progress, task: str, epochs: int):
 
 def read_truths(inputs: list[Path], names: list[str]) -> dict:
     """{take name: its truth Performance (points = true quasistatic, offsets = true dynamics)}
-    for simulated corpus takes (facedyn.usd.corpus keeps the truth beside each take)."""
-    from facedyn.usd.corpus import read_truth
+    for simulated corpus takes (facedyn.usd.corpus_files keeps the truth beside each take)."""
+    from facedyn.usd.corpus_files import read_truth
     from facedyn.usd.training_data import take_roots
 
     folders = {take_name(root): root if root.is_dir() else root.parent for root in take_roots(inputs)}
@@ -192,7 +193,7 @@ def read_truths(inputs: list[Path], names: list[str]) -> dict:
 
 
 def take_name(root: Path) -> str:
-    return root.name if root.is_dir() else root.parent.name if root.name in ("take.usda", "truth.usda") else root.stem
+    return root.name if root.is_dir() else root.parent.name if root.name in (TAKE_ROOT_FILE, "truth.usda") else root.stem
 
 
 def training_summary(model, takes, face, last: dict) -> dict:

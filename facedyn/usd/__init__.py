@@ -9,8 +9,8 @@ from facedyn.usd.plugin import register_plugins as _register_plugins
 _register_plugins()
 
 _PUBLIC = {
-    "read_actor_for": "actor", "write_actor": "actor",
-    "read_corpus_index": "corpus", "read_truth": "corpus", "write_simulated_take": "corpus",
+    "read_actor_for": "actor_asset", "write_actor": "actor_asset",
+    "read_corpus_index": "corpus_files", "read_truth": "corpus_files", "write_simulated_take": "corpus_files",
     "TakeError": "errors",
     "TakeFrames": "frames",
     "describe_take": "inspect", "format_description": "inspect",

@@ -2,7 +2,7 @@
 
 A stabilized take carries its solved skull (read below any removal attached to it: training
 reads the capture, not a quasistatic take). A simulated corpus take also has its true
-skull kept apart (facedyn.usd.corpus); training on it (`skull="truth"`) separates the
+skull kept apart (facedyn.usd.corpus_files); training on it (`skull="truth"`) separates the
 networks' accuracy from the stabilizer's.
 """
 from __future__ import annotations
@@ -11,8 +11,8 @@ from pathlib import Path
 
 from pxr import Sdf, Usd
 
-from facedyn.performance import CAPTURED, QUASISTATIC, Performance
-from facedyn.usd.corpus import CORPUS_INDEX, read_corpus_index
+from facedyn.performance import CAPTURED, QUASISTATIC, TAKE_ROOT_FILE, Performance, role
+from facedyn.usd.corpus_files import CORPUS_INDEX, read_corpus_index
 from facedyn.usd.errors import TakeError
 from facedyn.usd.take import TakeSource, find_face_mesh, read_stage, select_time_codes, stage_below
 from facedyn.usd.timing import Timing
@@ -27,7 +27,7 @@ def take_roots(inputs: list[Path]) -> list[Path]:
         path = Path(path)
         if path.is_dir() and (path / CORPUS_INDEX).is_file():
             roots += [path / take["folder"] for take in read_corpus_index(path)["takes"]]
-        elif path.is_dir() and (path / "take.usda").is_file():
+        elif path.is_dir() and (path / TAKE_ROOT_FILE).is_file():
             roots.append(path)
         elif path.is_file():
             roots.append(path)
@@ -63,14 +63,14 @@ def training_stage(root: Path, skull: str) -> tuple[Usd.Stage, Path]:
     folder = root if root.is_dir() else None
     if skull == "truth":
         truth_skull = (folder or root.parent) / "truth" / "skull.usdc"
-        capture = (folder or root.parent) / "capture.usdc"
+        capture = (folder or root.parent) / role(CAPTURED).layer_file()
         if not truth_skull.is_file():
             raise TakeError(f"{root}: no truth/skull.usdc beside it (only simulated takes have a true skull)")
         layer = Sdf.Layer.CreateAnonymous(".usda")
         Timing.from_layer(Sdf.Layer.FindOrOpen(str(capture))).apply(layer)  # the in-memory root keeps the take's rate
         layer.subLayerPaths = [str(truth_skull), str(capture)]
         return Usd.Stage.Open(layer), truth_skull
-    path = folder / "take.usda" if folder else root
+    path = folder / TAKE_ROOT_FILE if folder else root
     return stage_below(path, QUASISTATIC), path  # the stabilized capture, not a removal attached above it
 
 

@@ -17,7 +17,7 @@ pytest.importorskip("distributed")
 
 from facedyn.batch.cluster import open_client, run_steps  # noqa: E402
 from facedyn.batch.command import add_batch_arguments, run_batch  # noqa: E402
-from facedyn.batch.simulate import build_corpus_on  # noqa: E402
+from facedyn.batch.cluster_corpus import build_corpus_on  # noqa: E402
 from facedyn.batch.plan import Models, plan_batch  # noqa: E402
 from facedyn.batch.state import STATE_FILE, file_checksum  # noqa: E402
 from facedyn.dynamics.face import FaceSetup  # noqa: E402
@@ -26,7 +26,7 @@ from facedyn.dynamics.synthesis import synthesis_config, train_synthesis  # noqa
 from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal  # noqa: E402
 from facedyn.sim.corpus import TakeSpec, simulate_take  # noqa: E402
 from facedyn.sim.default_face import default_face  # noqa: E402
-from facedyn.usd.corpus import write_simulated_take  # noqa: E402
+from facedyn.usd.corpus_files import write_simulated_take  # noqa: E402
 from facedyn.usd.inspect import describe_take  # noqa: E402
 
 ALL_STEPS = "import,stabilize,remove,synthesize,preview"
@@ -166,6 +166,24 @@ def test_batch_steps_are_the_processors_with_the_flags_they_declare(tmp_path, ca
     assert models_from(batch_args("x", "-o", "y", "--removal-model", "f.removal")).removal == Path("f.removal")
     with pytest.raises(UsageError, match="old name of --removal-model"):
         models_from(batch_args("x", "-o", "y", "--removal-model", "f.removal", "--model", "g.removal"))
+
+
+def test_batch_options_are_the_declared_parameters_of_the_steps_in_role_order():
+    """STEPS, STEP_OPTIONS and the layer names agree with the processors' declarations and the role table."""
+    from facedyn.batch.plan import STEP_OPTIONS, STEPS, declaration, layer_name, options_of, step_order
+    from facedyn.performance import PREVIEW, SYNTHESIZED, role
+
+    assert STEPS == step_order(STEPS)  # the help's default lists them in the order the roles' ranks give
+    taken = {step: [option.field for option, _ in options_of(step)] for step in STEPS}
+    assert taken == {"import": [], "stabilize": ["actor"], "remove": ["removal"], "synthesize": ["synthesis", "skull_motion"], "preview": []}
+    for step in STEPS:
+        for option, parameter in options_of(step):
+            assert option.file == (parameter.type is Path), option  # models_from converts as the step reads it
+            assert bool(option.needs) == parameter.required, option  # a required parameter's option is checked before any take runs
+    assert len({option.flag for option in STEP_OPTIONS}) == len(STEP_OPTIONS)
+    assert layer_name("synthesize", "hop") == "synthesized.hop.usdc" and role(SYNTHESIZED).layer_file() == "synthesized.usdc"
+    assert role(PREVIEW).layer_file("hop").endswith(".preview.usdc")  # what the preview processor asks of its output's name
+    assert [role(declaration(step).writes.role).layer_file() for step in ("import", "preview")] == ["capture.usdc", "take.preview.usdc"]
 
 
 def tree_checksums(folder: Path) -> dict[str, str]:

@@ -11,7 +11,7 @@ from facedyn.preview.images import read_image
 from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
 from facedyn.processors.corpus_writer import build_corpus
-from facedyn.usd.corpus import read_truth
+from facedyn.usd.corpus_files import read_truth
 
 
 def cli(*argv):

@@ -19,7 +19,7 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import save_model
 from facedyn.dynamics.response import response_template
 from facedyn.performance import Actor
-from facedyn.usd.actor import write_actor
+from facedyn.usd.actor_asset import write_actor
 from facedyn.usd.runs import facedyn_metadata
 from facedyn.usd.stackstatus import stack_status
 from facedyn.usd.validate import validate_take

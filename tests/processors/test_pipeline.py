@@ -15,7 +15,7 @@ from facedyn.evaluation import residual_fraction, stabilization_errors
 from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
 from facedyn.processors.corpus_writer import build_corpus
-from facedyn.usd.corpus import read_truth
+from facedyn.usd.corpus_files import read_truth
 from facedyn.usd.take import read_take, read_take_below
 
 pytestmark = pytest.mark.slow  # every test reads the module's corpus and the F and H trained on it

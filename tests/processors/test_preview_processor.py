@@ -6,7 +6,7 @@ from pxr import Sdf, Usd
 from facedyn.cli import main
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
-from facedyn.usd.corpus import write_simulated_take
+from facedyn.usd.corpus_files import write_simulated_take
 
 
 @pytest.fixture(scope="module")

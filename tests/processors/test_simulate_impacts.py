@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from facedyn.cli import main
-from facedyn.usd.corpus import read_truth
+from facedyn.usd.corpus_files import read_truth
 
 
 def cli(*argv):

@@ -1,5 +1,5 @@
 """Building a corpus folder: a take that fails is skipped and recorded, an interrupted corpus
-resumes from its complete takes, a take of another recipe is refused (facedyn.usd.corpus)."""
+resumes from its complete takes, a take of another recipe is refused (facedyn.usd.corpus_files)."""
 import json
 from dataclasses import replace
 
@@ -9,7 +9,7 @@ from facedyn.errors import FacedynError
 from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
 from facedyn.processors.corpus_writer import build_corpus
-from facedyn.usd.corpus import CORPUS_INDEX, TAKE_RECIPE
+from facedyn.usd.corpus_files import CORPUS_INDEX, TAKE_RECIPE
 from facedyn.usd.training_data import take_roots
 
 DEAD_PID = 2**22 + 7  # above Linux's pid_max: no process has it

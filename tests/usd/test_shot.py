@@ -4,7 +4,7 @@ from pxr import Usd
 
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
-from facedyn.usd.corpus import write_simulated_take
+from facedyn.usd.corpus_files import write_simulated_take
 from facedyn.usd.shot import write_variant_shot
 
 

@@ -224,7 +224,7 @@ def test_layers_on_a_data_layer_names_its_root(tmp_path, capsys):
 def test_a_simulated_takes_truth_stack_reads_as_current(tmp_path):
     from facedyn.sim.corpus import TakeSpec, simulate_take
     from facedyn.sim.default_face import default_face
-    from facedyn.usd.corpus import write_simulated_take
+    from facedyn.usd.corpus_files import write_simulated_take
 
     rig = default_face(8)
     write_simulated_take(tmp_path, simulate_take(rig, TakeSpec("walk", "walk", "smile", duration_s=0.3, seed=1)), rig)

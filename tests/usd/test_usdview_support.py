@@ -11,7 +11,7 @@ from pxr import Plug, Usd
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
 from facedyn.usd import layerstack, plugin
-from facedyn.usd.corpus import write_simulated_take
+from facedyn.usd.corpus_files import write_simulated_take
 
 def test_usdview_plugin_is_registered_and_import_guarded():
     assert Plug.Registry().GetPluginWithName("facedynUsdview") is not None

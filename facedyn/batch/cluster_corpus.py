@@ -1,7 +1,7 @@
 """`simulate` on a Dask cluster: one task per take, the same corpus whatever the worker count.
 
 Each task simulates one take (seeded by its TakeSpec, so no result depends on which worker
-ran it or when) and writes it atomically with its recipe (facedyn.usd.corpus,
+ran it or when) and writes it atomically with its recipe (facedyn.usd.corpus_files,
 facedyn.processors.corpus_writer), so a corpus resumes and skips failing takes as `simulate` does; the index lists the takes in the order
 of the specs. The rig goes to the workers once.
 """
@@ -23,7 +23,7 @@ def simulate_and_write(output: Path, rig: FaceRig, spec: TakeSpec, tissue: Tissu
                        recipe: dict) -> tuple[dict | None, str | None, float]:
     """The task of one take: (its corpus index entry, None, seconds spent writing), or (None, the error, 0)
     when the take cannot be simulated (a FacedynError: skipped and recorded, the others go on)."""
-    from facedyn.usd.corpus import write_take_atomically
+    from facedyn.usd.corpus_files import write_take_atomically
 
     try:
         take = simulate_take(rig, spec, tissue)
@@ -41,7 +41,7 @@ def build_corpus_on(client, output: Path, rig: FaceRig, specs: list[TakeSpec], t
     from distributed import as_completed
 
     from facedyn.processors.corpus_writer import ResumedCorpus
-    from facedyn.usd.corpus import corpus_folder
+    from facedyn.usd.corpus_files import corpus_folder
 
     progress = progress or Progress.silent()
     output = corpus_folder(output).absolute()

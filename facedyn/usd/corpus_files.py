@@ -34,7 +34,7 @@ import numpy as np
 
 import facedyn
 from facedyn.errors import FacedynError
-from facedyn.performance import CAPTURED, QUASISTATIC, STABILIZED
+from facedyn.performance import CAPTURED, QUASISTATIC, STABILIZED, TAKE_ROOT_FILE, role
 from facedyn.rig import FaceRig, alignment_vertices
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
@@ -60,7 +60,7 @@ def write_simulated_take(folder: Path, take, rig: FaceRig) -> dict:
         alignment_vertices=alignment_vertices(rig),
     )
     capture = write_layer(
-        folder / "capture.usdc",
+        folder / role(CAPTURED).layer_file(),
         LayerContent(frames=frames, points=take.world_points(), topology=rig.topology, uvs=rig.uvs, face=face,
                      skull=schema.SkullAttributes(solver="identity")),
         timing, _provenance("simulate", spec, frames, [rig.name]), define=True,
@@ -76,7 +76,7 @@ def write_simulated_take(folder: Path, take, rig: FaceRig) -> dict:
         LayerContent(frames=frames, points=take.quasistatic, offsets=take.offsets, face=schema.FaceAttributes(role=QUASISTATIC)),
         timing, _provenance("simulate-truth-quasistatic", spec, frames, _layers(skull, capture)),
     )
-    write_take_root(folder / "take.usda", [capture], timing)
+    write_take_root(folder / TAKE_ROOT_FILE, [capture], timing)
     write_take_root(folder / "truth.usda", [quasistatic, skull, capture], timing)
     magnitude = np.linalg.norm(take.offsets, axis=-1)
     face_magnitude = magnitude[:, rig.face_vertices]
