@@ -130,6 +130,24 @@ def test_score_is_the_fraction_of_the_true_dynamics_left():
         fraction_left(np.zeros((40, 5, 3)), truth)
 
 
+def test_the_static_share_is_the_floor_of_any_estimate_that_averages_to_zero():
+    """static_share: the RMS of the truth's mean over the take over its RMS; an estimate with
+    zero mean over the take (here the truth less its mean, the best such) leaves exactly it."""
+    from testset.score import fraction_left, static_share
+
+    rng = np.random.default_rng(1)
+    ringing = rng.standard_normal((60, 6, 3))
+    ringing -= ringing.mean(axis=0)
+    offset = np.zeros((6, 3))
+    offset[2] = (3.0, 0.0, 0.0)  # one vertex settles 3 units away while the rest ring about rest
+    truth = {"dynamics": (ringing + offset).astype(np.float32), "face_vertices": np.array([0, 2, 3])}
+    share = static_share(truth)
+    expected = np.sqrt(9.0 / 3 / np.mean(np.sum((ringing + offset)[:, [0, 2, 3]] ** 2, axis=-1)))
+    assert share == pytest.approx(expected, rel=1e-5) and 0 < share < 1
+    assert fraction_left(ringing, truth) == pytest.approx(share, rel=1e-4)
+    assert static_share({"dynamics": ringing.astype(np.float32), "face_vertices": np.arange(6)}) < 1e-6
+
+
 def test_a_faster_mocap_is_the_same_path_in_less_time():
     from testset.takes import LEAD_S, skull_trajectory
 
