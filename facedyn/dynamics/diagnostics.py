@@ -43,7 +43,7 @@ def power_spectrum(signal: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarr
     return np.fft.rfftfreq(n, 1.0 / fps), power
 
 
-def skull_spectrum(translate: np.ndarray, orient: np.ndarray, landmarks: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
+def _skull_spectrum(translate: np.ndarray, orient: np.ndarray, landmarks: np.ndarray, fps: float) -> tuple[np.ndarray, np.ndarray]:
     """The power spectrum of the skull landmarks' accelerations in the skull frame (what drives
     the dynamics, and what network F reads)."""
     acc = skull_accelerations(translate, orient, landmarks, fps)[1:-1]
@@ -168,7 +168,7 @@ class SessionScore:
         return {name: sums.norm() / total for name, sums in self.left.items()}
 
 
-def band_amplitude(points: np.ndarray, fps: float, hz: float, vertices: np.ndarray) -> float:
+def _band_amplitude(points: np.ndarray, fps: float, hz: float, vertices: np.ndarray) -> float:
     """RMS amplitude of `points` (F, N, 3) over `vertices` within BAND_HZ of `hz` (Parseval on the
     windowed spectrum: a relative measure, comparable between two signals of one take)."""
     frequencies, power = power_spectrum(np.asarray(points)[:, vertices], fps)
@@ -178,8 +178,8 @@ def band_amplitude(points: np.ndarray, fps: float, hz: float, vertices: np.ndarr
 
 def residual_at_frequency(quasistatic: np.ndarray, captured: np.ndarray, fps: float, hz: float, vertices: np.ndarray) -> float:
     """The fraction of the capture's motion at `hz` (within BAND_HZ) that is left after removal."""
-    before = band_amplitude(captured, fps, hz, vertices)
-    return band_amplitude(quasistatic, fps, hz, vertices) / before if before > 0 else float("nan")
+    before = _band_amplitude(captured, fps, hz, vertices)
+    return _band_amplitude(quasistatic, fps, hz, vertices) / before if before > 0 else float("nan")
 
 
 def resynthesis_residual(captured: np.ndarray, resynthesized: np.ndarray, quasistatic: np.ndarray, vertices: np.ndarray) -> float:
@@ -196,7 +196,7 @@ def offset_spectrum(offsets: np.ndarray, translate: np.ndarray, orient: np.ndarr
     EXPRESSION_HZ (expression motion F mistook for dynamics) as a fraction of all of it.
     Also returns both spectra (normalized to their maxima) for a plot."""
     frequencies, power = power_spectrum(np.asarray(offsets)[:, vertices], fps)
-    skull_f, skull_p = skull_spectrum(translate, orient, landmarks, fps)
+    skull_f, skull_p = _skull_spectrum(translate, orient, landmarks, fps)
     total = power[frequencies > 0].sum()
     return {
         "offsets_peak_hz": peak_frequency(frequencies, power),

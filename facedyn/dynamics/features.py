@@ -70,7 +70,7 @@ def _check_landmarks(landmarks) -> np.ndarray:
     return b
 
 
-def pair_transforms(translate: np.ndarray, orient: np.ndarray) -> dict[str, np.ndarray]:
+def _pair_transforms(translate: np.ndarray, orient: np.ndarray) -> dict[str, np.ndarray]:
     """Per-frame terms of the pair (k-1, k), float64, zero at k = 0 (no predecessor).
 
     ``skull_rotation`` and ``skull_translation`` are the parts of I - T(k)^-1 T(k-1);
@@ -113,7 +113,7 @@ def skull_velocities(translate, orient, landmarks, fps) -> np.ndarray:
     """(F, L, 3) bdot_l(k) of eq. (2), float64; zero at k = 0."""
     t, q = check_transforms(translate, orient)
     b = _check_landmarks(landmarks)
-    pairs = pair_transforms(t, q)
+    pairs = _pair_transforms(t, q)
     v = np.einsum("kij,lj->kli", pairs["skull_rotation"], b) + pairs["skull_translation"][:, None, :]
     return v * check_fps(fps)
 
@@ -134,7 +134,7 @@ def _numpy_features(points, t, q, landmarks, fps, window, space) -> Features:
 
 
 def _frame_table(t, q, space) -> np.ndarray:
-    pairs = pair_transforms(t, q)
+    pairs = _pair_transforms(t, q)
     f = len(t)
     table = np.zeros((f, _TABLE))
     if space == "world":

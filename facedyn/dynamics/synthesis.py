@@ -215,7 +215,7 @@ def synthesize_dynamics(
     if response is None:  # the expression shape on the vertices stretch reads only (the same stretch, a fifth of the work on ICT)
         nb, lengths = model_stretch(model)
         used, nb = nb.compact()
-        shape = expression_shape(y[:, used], model.windows.get("stretch_smoothing", 0))
+        shape = _expression_shape(y[:, used], model.windows.get("stretch_smoothing", 0))
     propagator = model.propagator()
     network = model.network.to(resolve_device(device)).eval()
     dev = next(network.parameters()).device
@@ -238,7 +238,7 @@ def synthesize_dynamics(
     return points, offsets
 
 
-def expression_shape(quasistatic: np.ndarray, window: int) -> np.ndarray:
+def _expression_shape(quasistatic: np.ndarray, window: int) -> np.ndarray:
     """The quasistatic skin averaged over t-w..t+w: what stretch S(t) is measured on.
 
     Stretch is to tell H the expression. A quasistatic take made by F still holds some
@@ -348,7 +348,7 @@ def _prepare(take: TrainingSequence, face: FaceSetup, nb: UVNeighbourhoods, leng
         if y.shape != pts.shape:
             raise ValueError(f"take {take.name!r}: quasistatic shapes are {y.shape}, its points {pts.shape}")
         targets = skull_space(pts[:, face.samples], t, q, take.space) - y[:, face.samples]
-    s = stretch_features(expression_shape(y, config.target_window), nb, lengths, backend)
+    s = stretch_features(_expression_shape(y, config.target_window), nb, lengths, backend)
     b = skull_motion.features(t, q, face.landmarks, take.fps)
     keep = slice(config.trim, f - config.trim)
     yield {"inputs": np.concatenate([b[keep], s[keep].reshape(f - 2 * config.trim, -1)], axis=1),

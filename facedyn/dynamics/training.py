@@ -235,7 +235,7 @@ def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCal
                 drawn += count
             del chunk, x, y  # the next chunk loads into this one's memory
         train_loss = total / drawn * scale2
-        val_loss = None if checked is None else mean_squared_error(network, checked, config.batch_size)
+        val_loss = None if checked is None else _mean_squared_error(network, checked, config.batch_size)
         curve.append({"epoch": epoch, "train_loss": train_loss, "val_loss": val_loss})
         if progress is not None:
             progress(epoch, train_loss, val_loss)
@@ -258,7 +258,7 @@ def fit_new_network(spec: NetworkSpec, normalization, train, val, config: TrainC
 
 
 @torch.no_grad()
-def mean_squared_error(network: Network, examples, batch_size: int) -> float:
+def _mean_squared_error(network: Network, examples, batch_size: int) -> float:
     """Mean squared offset error per coordinate (cm^2) over a resident example set."""
     network.eval()
     total = 0.0

@@ -82,7 +82,7 @@ def check_frame(world: np.ndarray, translate: np.ndarray, orient: np.ndarray, re
     if not _can_tell(len(world), fps) or len(vertices) < 3:
         return None
     used = vertices[sample_frames(len(vertices), MOST_VERTICES)]  # evenly spaced indices
-    response = vertex_response(world, translate, orient, rest, used, fps)
+    response = _vertex_response(world, translate, orient, rest, used, fps)
     inertial = response.explained >= EXPLAINED
     share = response.quadrature_share
     return InertiaCheck(float(np.mean(inertial & (share < -SIGNED_SHARE))), float(np.mean(inertial & (share > SIGNED_SHARE))),
@@ -103,7 +103,7 @@ def skull_seed(world: np.ndarray, translate: np.ndarray, orient: np.ndarray, res
     """
     if not _can_tell(len(world), fps):
         return None
-    response = vertex_response(world, translate, orient, rest, np.arange(world.shape[1]), fps)
+    response = _vertex_response(world, translate, orient, rest, np.arange(world.shape[1]), fps)
     inertial = response.explained >= EXPLAINED
     if np.count_nonzero(inertial) < 3:
         return None
@@ -113,7 +113,7 @@ def skull_seed(world: np.ndarray, translate: np.ndarray, orient: np.ndarray, res
     return inertial & (response.in_phase >= SEED_SHARE * strongest)
 
 
-def vertex_response(world: np.ndarray, translate: np.ndarray, orient: np.ndarray, rest: np.ndarray,
+def _vertex_response(world: np.ndarray, translate: np.ndarray, orient: np.ndarray, rest: np.ndarray,
                     vertices: np.ndarray, fps: float, block: int = 1024) -> Response:
     """Each vertex's displacement from its rest fitted as alpha a + beta da/dt, a the frame's acceleration there,
     both in the frame and band-passed to BAND_HZ (least squares over the frames and axes), a block of vertices at a time."""

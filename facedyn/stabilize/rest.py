@@ -28,7 +28,7 @@ def median_rest(points: np.ndarray) -> np.ndarray:
     return np.median(np.asarray(points, dtype=np.float64), axis=0)
 
 
-def refine_rest(points: np.ndarray, rest: np.ndarray, width: float, steps: int = STEPS) -> np.ndarray:
+def _refine_rest(points: np.ndarray, rest: np.ndarray, width: float, steps: int = STEPS) -> np.ndarray:
     """Mean-shift steps of rest (...) towards the mode of points (F, ...) at this width.
 
     Weights k = psi'(x)/x up to 4/w^2: 1 within w/2, (w - |x|)/|x| out to w, 0 beyond;
@@ -49,4 +49,4 @@ def estimate_rest(points: np.ndarray, width: float, steps: int = STEPS) -> np.nd
     points = np.asarray(points)
     if points.ndim < 2:
         raise ValueError(f"points must be (frames, ...), got {points.shape}")
-    return refine_rest(points, median_rest(points), width, steps)
+    return _refine_rest(points, median_rest(points), width, steps)

@@ -152,7 +152,7 @@ def estimate_rigidity(
             rest = rest_estimate.estimate_rest(aligned, width) if last else rest_estimate.median_rest(aligned)
         spread = np.percentile(np.linalg.norm(aligned - rest, axis=-1), SPREAD_QUANTILE, axis=0)
         floor = noise_floor(spread, candidates)
-        weights = rigidity_weights(spread / floor)
+        weights = _rigidity_weights(spread / floor)
         if prior is not None:
             weights = np.minimum(weights, prior.weights)
         if np.count_nonzero(weights) < MIN_RIGID:  # nothing stands out: every vertex counts
@@ -181,7 +181,7 @@ def noise_floor(spread: np.ndarray, candidates: np.ndarray | None = None) -> flo
     return max(float(np.percentile(chosen, FLOOR_QUANTILE)), 1e-6)
 
 
-def rigidity_weights(relative_spread: np.ndarray) -> np.ndarray:
+def _rigidity_weights(relative_spread: np.ndarray) -> np.ndarray:
     """1 up to FULL_WEIGHT x the noise floor, easing (smoothstep) to 0 at ZERO_WEIGHT x."""
     t = np.clip((np.asarray(relative_spread) - FULL_WEIGHT) / (ZERO_WEIGHT - FULL_WEIGHT), 0.0, 1.0)
     return 1.0 - t * t * (3.0 - 2.0 * t)

@@ -78,7 +78,7 @@ def smooth(values: np.ndarray, weights: np.ndarray, lam: float, order: int, band
     return solveh_banded(a, weights[:, None] * values, check_finite=False)
 
 
-def degrees_of_freedom(frames: int, lam: float, order: int) -> float:
+def _degrees_of_freedom(frames: int, lam: float, order: int) -> float:
     """Trace of the smoother's hat matrix (all weights 1), from the penalty's eigenvalues."""
     eigen = (2.0 * np.sin(np.pi * np.arange(frames) / (2.0 * frames))) ** (2 * order)
     return float(np.sum(1.0 / (1.0 + lam * eigen)))
@@ -106,7 +106,7 @@ def choose_cutoff(paths: np.ndarray, weights: np.ndarray, fps: float, order: int
     for cutoff in judged:
         lam = smoothing_weight(cutoff, fps, order)
         fitted = smooth(paths, weights, lam, order, bands)
-        free = 1.0 - degrees_of_freedom(frames, lam, order) / used
+        free = 1.0 - _degrees_of_freedom(frames, lam, order) / used
         residual = np.sum(weights[:, None] * (fitted - paths) ** 2) / used
         scores.append(residual / (free * free) if free > 0 else np.inf)
     scores = np.array(scores)

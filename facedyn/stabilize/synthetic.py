@@ -29,7 +29,7 @@ class SyntheticCapture:
     fps: float
 
 
-def face_surface(vertices: int) -> np.ndarray:
+def _face_surface(vertices: int) -> np.ndarray:
     """(vertices, 3) points spread evenly (Fibonacci) over the front of the head ellipsoid."""
     k = np.arange(vertices) + 0.5
     z = k / vertices  # uniform in (0, 1): a hemisphere of directions facing +z
@@ -79,7 +79,7 @@ def synthetic_take(
     if frames < 1 or vertices < 10:
         raise ValueError(f"need frames >= 1 and vertices >= 10, got {frames} and {vertices}")
     rng = np.random.default_rng(seed)
-    rest = face_surface(vertices)
+    rest = _face_surface(vertices)
     x, y, z = rest.T
     t = np.arange(frames) / fps
     eyes = [_nearest(rest, (-0.35, 0.25, 0.9)), _nearest(rest, (0.35, 0.25, 0.9))]
