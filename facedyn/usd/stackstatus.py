@@ -25,6 +25,7 @@ from pathlib import Path
 
 from pxr import Sdf, Tf, Usd
 
+from facedyn.errors import UsageError
 from facedyn.performance import CAPTURED, roles
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import Entry, effective_ranks, is_take_root, recorded_role_name
@@ -167,6 +168,14 @@ def lists_itself(root: str | os.PathLike) -> str | None:
     itself = root.resolve()
     layer = open_root(root)
     return next((a for a in list(layer.subLayerPaths) if resolve_asset_path(a, root.parent) == itself), None)
+
+
+def check_not_self_listing(root: str | os.PathLike) -> None:
+    """Refuse a take root that lists itself: USD only warns, and composes the rest as if it did not."""
+    itself = lists_itself(root)
+    if itself is not None:
+        raise UsageError(f"{root}: lists itself among its subLayers ({itself}); take that entry out first: "
+                         f"usdfacedyn layers {root} --detach {itself}")
 
 
 def frame_range(data: dict | None) -> tuple[float, float] | None:

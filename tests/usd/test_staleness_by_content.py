@@ -190,6 +190,10 @@ def test_a_root_listing_itself_is_refused_until_that_entry_is_detached(tmp_path,
     assert "lists itself among its subLayers (./take.usda)" in capsys.readouterr().err
     assert cli("layers", root) == 2
     assert cli("layers", root, "--mute", "./quasistatic.usdc") == 2
+    capsys.readouterr()
+    assert main(["inspect", str(root)]) == 2  # it showed the rest of the stack and exited 0, with only USD's warning
+    err = capsys.readouterr().err
+    assert "lists itself among its subLayers (./take.usda)" in err and len(err.strip().splitlines()) == 1, err
     assert cli("layers", root, "--detach", "./take.usda") == 0
     assert "./take.usda" not in Sdf.Layer.OpenAsAnonymous(str(root)).subLayerPaths
     assert set(_states(root).values()) == {"ok"}
