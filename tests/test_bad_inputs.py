@@ -113,6 +113,10 @@ def test_a_truncated_layer_of_a_take_is_named(tmp_path, capsys):
     for command in ("validate", "inspect"):
         code, _, err = run([command, take], capsys)
         one_line(code, err, 1, f"names {damaged}, which is not a readable USD file (damaged or truncated?)")
+    code, out, err = run(["layers", take], capsys)  # it listed the damaged layer as a plain layer, "ok"
+    assert code == 0 and err == "", err
+    assert [line.split()[-1] for line in out.splitlines() if line.startswith("./")] == ["unreadable", "ok"], out
+    assert "unreadable: not a readable USD file (damaged or truncated?)" in out
 
 
 @pytest.mark.parametrize("field, value, written", [

@@ -54,14 +54,17 @@ class LayerStatus:
     reason: str  # why it is stale ("" when it is not)
     needs: str = ""  # the role it is computed from, when no layer of that role lies below it
     unchecked: str = ""  # what of its inputs' content could not be checked (an input not found from here, an older layer)
+    readable: bool = True  # False: a file USD cannot open (damaged or truncated), which every reader of the take refuses
 
     @property
     def state(self) -> str:
-        """muted, missing, stale (or fed by nothing of the role it reads) or ok: what `layers` prints and validate reports."""
+        """muted, missing, unreadable, stale (or fed by nothing of the role it reads) or ok: what `layers` prints and validate reports."""
         if self.muted:
             return "muted"
         if not self.exists:
             return "missing"
+        if not self.readable:
+            return "unreadable"
         return "stale" if self.stale or self.needs else "ok"
 
     @property
@@ -149,11 +152,21 @@ def stack_status(root: str | os.PathLike) -> list[LayerStatus]:
 
 def _status(entry: Entry, muted: bool, take: tuple[float, float] | None, reason: str, needs: str = "",
             unchecked: str = "") -> LayerStatus:
+    exists = entry.path.is_file()
     return LayerStatus(
         asset=entry.asset, path=entry.path, role=entry.role_name, processor=entry.processor,
-        rank=entry.rank, muted=muted, exists=entry.path.is_file(), frames=frame_range(entry.metadata),
+        rank=entry.rank, muted=muted, exists=exists, frames=frame_range(entry.metadata),
         take_frames=take, stale=bool(reason), reason=reason, needs=needs, unchecked=unchecked,
+        readable=entry.metadata is not None or not exists or _opens(entry.path),
     )
+
+
+def _opens(path: Path) -> bool:
+    """Whether USD opens the layer file at all: a layer without facedyn metadata may be a plain layer or a damaged one."""
+    try:
+        return Sdf.Layer.OpenAsAnonymous(str(path), metadataOnly=True) is not None
+    except Tf.ErrorException:
+        return False
 
 
 def stale_below(root: str | os.PathLike, role_name: str) -> list[LayerStatus]:
@@ -264,6 +277,8 @@ def format_layers(statuses: list[LayerStatus]) -> str:
         if not s.covers:
             frames += f" (take {s.take_frames[0]:g}..{s.take_frames[1]:g})"
         lines.append(f"{s.asset:<36} {s.role or '-':<12} {s.processor or '-':<12} {frames:<24} {s.state}")
+        if not s.readable:
+            lines.append("    unreadable: not a readable USD file (damaged or truncated?); every reader of the take refuses it")
         if s.stale:
             lines.append(f"    stale: {s.reason}")
         if s.needs:
