@@ -157,14 +157,15 @@ def _status(entry: Entry, muted: bool, take: tuple[float, float] | None, reason:
         asset=entry.asset, path=entry.path, role=entry.role_name, processor=entry.processor,
         rank=entry.rank, muted=muted, exists=exists, frames=frame_range(entry.metadata),
         take_frames=take, stale=bool(reason), reason=reason, needs=needs, unchecked=unchecked,
-        readable=entry.metadata is not None or not exists or _opens(entry.path),
+        readable=not exists or _opens(entry.path),
     )
 
 
 def _opens(path: Path) -> bool:
-    """Whether USD opens the layer file at all: a layer without facedyn metadata may be a plain layer or a damaged one."""
+    """Whether USD opens the whole layer file: its metadata reads from a text layer cut short, or not at all from a
+    damaged one (which then looks like a plain layer). A crate file opens without reading its arrays."""
     try:
-        return Sdf.Layer.OpenAsAnonymous(str(path), metadataOnly=True) is not None
+        return Sdf.Layer.OpenAsAnonymous(str(path)) is not None
     except Tf.ErrorException:
         return False
 
