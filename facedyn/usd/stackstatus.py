@@ -26,6 +26,7 @@ from pathlib import Path
 from pxr import Sdf, Tf, Usd
 
 from facedyn.errors import UsageError
+from facedyn.io.files import special_file_kind
 from facedyn.performance import CAPTURED, roles
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import Entry, effective_ranks, is_take_root, recorded_role_name
@@ -54,7 +55,7 @@ class LayerStatus:
     reason: str  # why it is stale ("" when it is not)
     needs: str = ""  # the role it is computed from, when no layer of that role lies below it
     unchecked: str = ""  # what of its inputs' content could not be checked (an input not found from here, an older layer)
-    readable: bool = True  # False: a file USD cannot open (damaged or truncated), which every reader of the take refuses
+    unreadable: str = ""  # why USD cannot open the file (damaged, cut short, a FIFO): every reader of the take refuses it
 
     @property
     def state(self) -> str:
@@ -63,7 +64,7 @@ class LayerStatus:
             return "muted"
         if not self.exists:
             return "missing"
-        if not self.readable:
+        if self.unreadable:
             return "unreadable"
         return "stale" if self.stale or self.needs else "ok"
 
@@ -152,22 +153,28 @@ def stack_status(root: str | os.PathLike) -> list[LayerStatus]:
 
 def _status(entry: Entry, muted: bool, take: tuple[float, float] | None, reason: str, needs: str = "",
             unchecked: str = "") -> LayerStatus:
-    exists = entry.path.is_file()
+    special = special_file_kind(entry.path)
+    exists = entry.path.is_file() or special is not None
     return LayerStatus(
         asset=entry.asset, path=entry.path, role=entry.role_name, processor=entry.processor,
         rank=entry.rank, muted=muted, exists=exists, frames=frame_range(entry.metadata),
         take_frames=take, stale=bool(reason), reason=reason, needs=needs, unchecked=unchecked,
-        readable=not exists or _opens(entry.path),
+        unreadable=_unreadable(entry.path, special) if exists else "",
     )
 
 
-def _opens(path: Path) -> bool:
-    """Whether USD opens the whole layer file: its metadata reads from a text layer cut short, or not at all from a
-    damaged one (which then looks like a plain layer). A crate file opens without reading its arrays."""
+def _unreadable(path: Path, special: str | None) -> str:
+    """Why USD cannot open the whole layer file ("" when it can). A special file is never opened (a FIFO would block);
+    the metadata of a text layer cut short still reads, a damaged one's not at all (it then looks like a plain layer).
+    A crate file opens without reading its arrays."""
+    if special is not None:
+        return f"is {special}, not a USD file; facedyn opens only regular files"
     try:
-        return Sdf.Layer.OpenAsAnonymous(str(path)) is not None
+        if Sdf.Layer.OpenAsAnonymous(str(path)) is not None:
+            return ""
     except Tf.ErrorException:
-        return False
+        pass
+    return "not a readable USD file (damaged or truncated?)"
 
 
 def stale_below(root: str | os.PathLike, role_name: str) -> list[LayerStatus]:
@@ -278,8 +285,8 @@ def format_layers(statuses: list[LayerStatus]) -> str:
         if not s.covers:
             frames += f" (take {s.take_frames[0]:g}..{s.take_frames[1]:g})"
         lines.append(f"{s.asset:<36} {s.role or '-':<12} {s.processor or '-':<12} {frames:<24} {s.state}")
-        if not s.readable:
-            lines.append("    unreadable: not a readable USD file (damaged or truncated?); every reader of the take refuses it")
+        if s.unreadable:
+            lines.append(f"    unreadable: {s.unreadable}; every reader of the take refuses it")
         if s.stale:
             lines.append(f"    stale: {s.reason}")
         if s.needs:

@@ -125,7 +125,7 @@ def plain_take(tmp_path_factory) -> Path:
 @given(st.sampled_from(KINDS), st.sampled_from([".usdc", ".usda"]), st.sampled_from(["inspect", "validate", "layers", "stabilize"]))
 def test_a_take_listing_a_special_file_ends_at_once(plain_take, kind, suffix, command):
     """A sublayer that is a FIFO would block USD's composition forever: readers name it in one line before USD opens it,
-    and `layers` (which composes nothing) lists it as not ok, so it can be detached."""
+    and `layers` (which composes nothing) lists it as unreadable, saying what it is, so it can be detached."""
     from pxr import Sdf
 
     if kind.startswith("/dev/") and not os.path.exists(kind):
@@ -151,7 +151,9 @@ def test_a_take_listing_a_special_file_ends_at_once(plain_take, kind, suffix, co
         if command == "layers":
             assert code == 0 and err == "", err
             listed = [line.split() for line in stdout.getvalue().splitlines() if line.split() and line.split()[0].endswith(path.name)]
-            assert listed and listed[0][-1] != "ok", stdout.getvalue()
+            assert listed and listed[0][-1] == "unreadable", stdout.getvalue()
+            what = {"fifo": "a FIFO", "link to fifo": "a FIFO", "socket": "a socket"}.get(kind, "a character device")
+            assert f"unreadable: is {what}, not a USD file" in stdout.getvalue(), stdout.getvalue()
         else:
             assert code == 1 and str(path) in err and "not a USD file" in err and len(err.strip().splitlines()) == 1, err
             assert not (folder / "s.usdc").exists()
