@@ -18,6 +18,7 @@ Exit codes: 0 ok, 1 failure (bad input, failed validation), 2 usage error.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 from dataclasses import dataclass
@@ -166,7 +167,12 @@ def _cmd_inspect(args) -> int:
         print(json.dumps(model, indent=2, default=str) if args.json else format_model_description(model))
         return EXIT_OK
     from facedyn.usd.inspect import describe_take, format_description
+    from facedyn.usd.errors import TakeError
+    from facedyn.usd.stackstatus import check_not_self_listing
 
+    if path.is_file():
+        with contextlib.suppress(TakeError):  # an unreadable take is named by describe_take
+            check_not_self_listing(path)
     description = describe_take(args.path)
     print(json.dumps(description, indent=2, default=str) if args.json else format_description(description))
     return EXIT_OK
@@ -176,15 +182,13 @@ def _cmd_layers(args) -> int:
     from facedyn.errors import UsageError
     from facedyn.io.files import check_not_special
     from facedyn.usd import rootedit
-    from facedyn.usd.stackstatus import check_take_root, format_layers, lists_itself, stack_status
+    from facedyn.usd.stackstatus import check_not_self_listing, check_take_root, format_layers, stack_status
 
     check_not_special(args.take)
     check_take_root(args.take)
-    itself = lists_itself(args.take)
     detaching_itself = args.detach is not None and args.take.resolve() in (Path(args.detach).resolve(), (args.take.parent / args.detach).resolve())
-    if itself is not None and not detaching_itself:
-        raise UsageError(f"{args.take}: lists itself among its subLayers ({itself}); take that entry out first: "
-                         f"usdfacedyn layers {args.take} --detach {itself}")
+    if not detaching_itself:
+        check_not_self_listing(args.take)
     if (args.above or args.below) and not args.move:
         raise UsageError("--above/--below go with --move LAYER")
     if args.move and bool(args.above) == bool(args.below):

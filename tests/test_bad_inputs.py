@@ -113,6 +113,25 @@ def test_a_truncated_layer_of_a_take_is_named(tmp_path, capsys):
     for command in ("validate", "inspect"):
         code, _, err = run([command, take], capsys)
         one_line(code, err, 1, f"names {damaged}, which is not a readable USD file (damaged or truncated?)")
+    code, out, err = run(["layers", take], capsys)  # it listed the damaged layer as a plain layer, "ok"
+    assert code == 0 and err == "", err
+    assert [line.split()[-1] for line in out.splitlines() if line.startswith("./")] == ["unreadable", "ok"], out
+    assert "unreadable: not a readable USD file (damaged or truncated?)" in out
+
+
+def test_a_text_layer_cut_short_is_unreadable_though_its_metadata_reads(tmp_path, capsys):
+    """A .usda cut in its body still has a readable header: layers showed it ok while validate refused the take."""
+    take = small_take(tmp_path)
+    text = take.parent / "stabilized.usda"
+    Sdf.Layer.FindOrOpen(str(take.parent / "capture.usdc")).Export(str(text))
+    text.write_bytes(text.read_bytes()[: -len(text.read_bytes()) // 3])
+    root = Sdf.Layer.FindOrOpen(str(take))
+    root.subLayerPaths.insert(0, "./stabilized.usda")
+    root.Save()
+    code, _, err = run(["validate", take], capsys)
+    one_line(code, err, 1, f"names {text}, which is not a readable USD file")
+    code, out, err = run(["layers", take], capsys)
+    assert code == 0 and [line.split()[-1] for line in out.splitlines() if line.startswith("./")] == ["unreadable", "ok"], out
 
 
 @pytest.mark.parametrize("field, value, written", [

@@ -32,9 +32,12 @@ def moving_average(values, window: int = TARGET_WINDOW) -> np.ndarray:
     if int(window) != window or window < 0:
         raise ValueError(f"window must be a non-negative whole number of frames, got {window}")
     w = int(window)
+    f = len(v)
+    if w >= f:  # every window spans the take: its ends' repeats counted, not padded (2w frames of a crafted 10,000-frame window)
+        t = np.arange(f, dtype=np.float64).reshape((f,) + (1,) * (v.ndim - 1))
+        return ((w - t) * v[0] + v.sum(axis=0) + (t + w - f + 1) * v[-1]) / (2 * w + 1)
     padded = np.pad(v, [(w, w)] + [(0, 0)] * (v.ndim - 1), mode="edge")
     csum = np.concatenate([np.zeros((1,) + v.shape[1:]), np.cumsum(padded, axis=0)])
-    f = len(v)
     return (csum[2 * w + 1: 2 * w + 1 + f] - csum[:f]) / (2 * w + 1)
 
 

@@ -132,16 +132,14 @@ def _check_fresh_below(inputs: list[Path], role_name: str) -> None:
 def _check_roots_read(inputs: list[Path]) -> None:
     """Refuse a take root that lists itself (USD only warns, and composes the rest as if it did not)."""
     from facedyn.usd.errors import TakeError
-    from facedyn.usd.stackstatus import lists_itself
+    from facedyn.usd.stackstatus import check_not_self_listing
 
     for path in inputs:
         try:
-            itself = lists_itself(path) if path.is_file() else None
+            if path.is_file():
+                check_not_self_listing(path)
         except TakeError:
             continue  # an unreadable take is reported by its reader
-        if itself is not None:
-            raise UsageError(f"{path}: lists itself among its subLayers ({itself}); take that entry out first: "
-                             f"usdfacedyn layers {path} --detach {itself}")
 
 
 LAYER_SUFFIXES = (".usd", ".usda", ".usdc")  # what a take and its layers can be written as (not .usdz packages)

@@ -25,6 +25,8 @@ from pathlib import Path
 
 from pxr import Sdf, Tf, Usd
 
+from facedyn.errors import UsageError
+from facedyn.io.files import special_file_kind
 from facedyn.performance import CAPTURED, roles
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import Entry, effective_ranks, is_take_root, recorded_role_name
@@ -53,14 +55,17 @@ class LayerStatus:
     reason: str  # why it is stale ("" when it is not)
     needs: str = ""  # the role it is computed from, when no layer of that role lies below it
     unchecked: str = ""  # what of its inputs' content could not be checked (an input not found from here, an older layer)
+    unreadable: str = ""  # why USD cannot open the file (damaged, cut short, a FIFO): every reader of the take refuses it
 
     @property
     def state(self) -> str:
-        """muted, missing, stale (or fed by nothing of the role it reads) or ok: what `layers` prints and validate reports."""
+        """muted, missing, unreadable, stale (or fed by nothing of the role it reads) or ok: what `layers` prints and validate reports."""
         if self.muted:
             return "muted"
         if not self.exists:
             return "missing"
+        if self.unreadable:
+            return "unreadable"
         return "stale" if self.stale or self.needs else "ok"
 
     @property
@@ -148,11 +153,28 @@ def stack_status(root: str | os.PathLike) -> list[LayerStatus]:
 
 def _status(entry: Entry, muted: bool, take: tuple[float, float] | None, reason: str, needs: str = "",
             unchecked: str = "") -> LayerStatus:
+    special = special_file_kind(entry.path)
+    exists = entry.path.is_file() or special is not None
     return LayerStatus(
         asset=entry.asset, path=entry.path, role=entry.role_name, processor=entry.processor,
-        rank=entry.rank, muted=muted, exists=entry.path.is_file(), frames=frame_range(entry.metadata),
+        rank=entry.rank, muted=muted, exists=exists, frames=frame_range(entry.metadata),
         take_frames=take, stale=bool(reason), reason=reason, needs=needs, unchecked=unchecked,
+        unreadable=_unreadable(entry.path, special) if exists else "",
     )
+
+
+def _unreadable(path: Path, special: str | None) -> str:
+    """Why USD cannot open the whole layer file ("" when it can). A special file is never opened (a FIFO would block);
+    the metadata of a text layer cut short still reads, a damaged one's not at all (it then looks like a plain layer).
+    A crate file opens without reading its arrays."""
+    if special is not None:
+        return f"is {special}, not a USD file; facedyn opens only regular files"
+    try:
+        if Sdf.Layer.OpenAsAnonymous(str(path)) is not None:
+            return ""
+    except Tf.ErrorException:
+        pass
+    return "not a readable USD file (damaged or truncated?)"
 
 
 def stale_below(root: str | os.PathLike, role_name: str) -> list[LayerStatus]:
@@ -167,6 +189,14 @@ def lists_itself(root: str | os.PathLike) -> str | None:
     itself = root.resolve()
     layer = open_root(root)
     return next((a for a in list(layer.subLayerPaths) if resolve_asset_path(a, root.parent) == itself), None)
+
+
+def check_not_self_listing(root: str | os.PathLike) -> None:
+    """Refuse a take root that lists itself: USD only warns, and composes the rest as if it did not."""
+    itself = lists_itself(root)
+    if itself is not None:
+        raise UsageError(f"{root}: lists itself among its subLayers ({itself}); take that entry out first: "
+                         f"usdfacedyn layers {root} --detach {itself}")
 
 
 def frame_range(data: dict | None) -> tuple[float, float] | None:
@@ -255,6 +285,8 @@ def format_layers(statuses: list[LayerStatus]) -> str:
         if not s.covers:
             frames += f" (take {s.take_frames[0]:g}..{s.take_frames[1]:g})"
         lines.append(f"{s.asset:<36} {s.role or '-':<12} {s.processor or '-':<12} {frames:<24} {s.state}")
+        if s.unreadable:
+            lines.append(f"    unreadable: {s.unreadable}; every reader of the take refuses it")
         if s.stale:
             lines.append(f"    stale: {s.reason}")
         if s.needs:

@@ -18,7 +18,7 @@ from pxr import Usd, UsdGeom, UsdValidation
 from facedyn.usd import schema
 from facedyn.usd.errors import TakeError
 from facedyn.usd.layerstack import is_take_root
-from facedyn.usd.stackstatus import needs_message, open_root, stack_status
+from facedyn.usd.stackstatus import lists_itself, needs_message, open_root, stack_status
 from facedyn.usd.stage import layer_name, open_stage, resolve_asset_path
 from facedyn.usd.take import find_face_mesh, read_skull_transforms
 from facedyn.usd.takechecks import frame_grid_problem, units_problem
@@ -37,7 +37,17 @@ class Finding:
 
 
 def validate_take(path: str | os.PathLike) -> list[Finding]:
-    """Every finding about the take at `path`, each naming its file (the take when no layer is more precise)."""
+    """Every finding about the take at `path`, each naming its file (the take when no layer is more precise).
+
+    A root that lists itself is reported by its stack's findings alone: composing it, USD
+    prints a warning of its own and goes on as if the entry were not there.
+    """
+    try:
+        itself = lists_itself(path)
+    except TakeError:
+        itself = None  # an unreadable root: open_stage names it
+    if itself is not None:
+        return stack_findings(Path(path))
     stage = open_stage(path)
     findings = usd_findings(stage)
     if is_take_root(stage.GetRootLayer()):

@@ -52,6 +52,22 @@ def test_clamped_ends_repeat_the_end_frames():
     np.testing.assert_allclose(moving_average(v, window=0), v)
 
 
+def test_a_window_longer_than_the_take_allocates_nothing_of_its_length():
+    """A crafted model's 10,000-frame stretch window padded 20,000 frames onto a 70-frame take (1,700 times its size)."""
+    import tracemalloc
+
+    v = np.random.default_rng(0).random((7, 40, 3))
+    for w in (7, 8, 50):  # each frame's window reaches past both ends: the same clamped mean as padding would give
+        padded = np.pad(v, [(w, w), (0, 0), (0, 0)], mode="edge")
+        expected = np.stack([padded[t:t + 2 * w + 1].mean(axis=0) for t in range(len(v))])
+        np.testing.assert_allclose(moving_average(v, w), expected, rtol=1e-12)
+    tracemalloc.start()
+    moving_average(v, 10000)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 10 * v.nbytes, peak
+
+
 def test_bad_input_is_a_clear_error():
     with pytest.raises(ValueError, match="window"):
         moving_average(np.zeros((4, 3)), window=-1)

@@ -122,7 +122,7 @@ def test_model_files_load_or_give_a_clear_error(data):
             only_files(Path(folder), {"actor.model"})
 
 
-SIZE_FIELDS = ("windows.skull", "skull_motion", "skull_landmarks", "skin_samples", "architecture.inputs")
+SIZE_FIELDS = ("windows.skull", "windows (another)", "skull_motion", "skull_landmarks", "skin_samples", "architecture.inputs")
 
 
 @st.composite
@@ -136,6 +136,9 @@ def crafted_sizes(draw, blob: bytes) -> bytes:
     event(f"crafted size: {field}")
     if field == "windows.skull":
         metadata["windows"]["skull"] = draw(st.sampled_from([0, 1, 3, 100, 10000, 10001]))
+    elif field == "windows (another)":  # the skin and target windows of F, H's stretch smoothing: 10,000 frames on an 8-frame take
+        key = draw(st.sampled_from(sorted(k for k in metadata["windows"] if k != "skull")))
+        metadata["windows"][key] = draw(st.sampled_from([0, 1, 100, 10000, 10001]))
     elif field == "skull_motion":
         metadata["skull_motion"] = {"kind": draw(st.sampled_from(["velocity", "acceleration"])),
                                     "past": draw(st.sampled_from([0, 1, 2, 30, 10000, 10**9])),

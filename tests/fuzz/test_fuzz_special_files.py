@@ -7,6 +7,7 @@ until a writer comes, a device would feed it forever. A writer arrives at every 
 import contextlib
 import io
 import os
+import shutil
 import socket
 import tempfile
 import threading
@@ -106,3 +107,53 @@ def test_special_files_end_in_one_line_naming_them(kind, suffix, user):
                 assert not (folder / "out").exists()
         finally:
             done.set()
+
+
+@pytest.fixture(scope="module")
+def plain_take(tmp_path_factory) -> Path:
+    """A take imported from a small mesh cache (capture.usdc and take.usda)."""
+    import numpy as np
+    from usd_fixtures import grid_mesh, write_mesh_cache
+
+    folder = tmp_path_factory.mktemp("take")
+    points, counts, indices = grid_mesh(4)
+    cache = write_mesh_cache(folder / "cache.usda", np.stack([points + 0.1 * i for i in range(4)]), counts, indices)
+    assert main(["import", str(cache), "-o", str(folder / "take" / "capture.usdc"), "-q"]) == 0
+    return folder / "take"
+
+
+@given(st.sampled_from(KINDS), st.sampled_from([".usdc", ".usda"]), st.sampled_from(["inspect", "validate", "layers", "stabilize"]))
+def test_a_take_listing_a_special_file_ends_at_once(plain_take, kind, suffix, command):
+    """A sublayer that is a FIFO would block USD's composition forever: readers name it in one line before USD opens it,
+    and `layers` (which composes nothing) lists it as unreadable, saying what it is, so it can be detached."""
+    from pxr import Sdf
+
+    if kind.startswith("/dev/") and not os.path.exists(kind):
+        return
+    event(f"sublayer: {kind}")
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = Path(scratch) / "take"
+        shutil.copytree(plain_take, folder)
+        path = _special(kind, folder, suffix)
+        done = threading.Event()
+        threading.Thread(target=_unblock_later, args=(folder, done), daemon=True).start()
+        root = Sdf.Layer.OpenAsAnonymous(str(folder / "take.usda"))
+        root.subLayerPaths.insert(0, str(path) if kind.startswith("/dev/") else f"./{path.name}")
+        root.Export(str(folder / "take.usda"))
+        argv = {"stabilize": ["stabilize", str(folder / "take.usda"), "-o", str(folder / "s.usdc")]}.get(command, [command, str(folder / "take.usda")])
+        stdout, stderr = io.StringIO(), io.StringIO()
+        try:
+            with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(stdout):
+                code = main(argv)
+        finally:
+            done.set()
+        err = stderr.getvalue()
+        if command == "layers":
+            assert code == 0 and err == "", err
+            listed = [line.split() for line in stdout.getvalue().splitlines() if line.split() and line.split()[0].endswith(path.name)]
+            assert listed and listed[0][-1] == "unreadable", stdout.getvalue()
+            what = {"fifo": "a FIFO", "link to fifo": "a FIFO", "socket": "a socket"}.get(kind, "a character device")
+            assert f"unreadable: is {what}, not a USD file" in stdout.getvalue(), stdout.getvalue()
+        else:
+            assert code == 1 and str(path) in err and "not a USD file" in err and len(err.strip().splitlines()) == 1, err
+            assert not (folder / "s.usdc").exists()

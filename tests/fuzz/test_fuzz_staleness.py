@@ -207,3 +207,47 @@ def _edit_points(draw, path: Path) -> None:
     by = np.float32([draw(st.sampled_from([1e-3, 5.0, -0.5])) for _ in range(3)])
     layer.SetTimeSample(POINTS, t, Vt.Vec3fArray.FromNumpy((np.asarray(layer.QueryTimeSample(POINTS, t)) + by).astype(np.float32)))
     layer.Export(str(path))
+
+
+@settings(max_examples=25)
+@given(data=st.data())
+def test_layers_and_validate_agree_on_each_layer_after_a_drawn_edit_of_the_stack(studio, data):
+    """After `layers --mute quasistatic.usdc` layers showed the synthesized layer ok while validate failed it; a
+    truncated layer was listed ok while validate refused the take. Each state `layers` shows is what validate reports."""
+    from facedyn.usd.errors import TakeError
+    from facedyn.usd.rootedit import detach, mute
+    from facedyn.usd.validate import validate_take
+
+    with tempfile.TemporaryDirectory() as scratch:
+        take = Path(scratch) / "take"
+        shutil.copytree(studio / "take", take)
+        root = take / "take.usda"
+        category = data.draw(st.sampled_from(["content", "mute", "detach", "truncate", "delete"]))
+        name = data.draw(st.sampled_from([n for n, _ in STACK[1:]]))
+        event(category)
+        if category == "content":
+            _edit(data.draw, take)
+        elif category in ("mute", "detach"):
+            (mute if category == "mute" else detach)(root, f"./{name}")
+        elif category == "truncate":
+            (take / name).write_bytes((take / name).read_bytes()[: data.draw(st.integers(0, (take / name).stat().st_size - 1))])
+        else:
+            (take / name).unlink()
+        statuses = [s for s in stack_status(root) if not s.muted]
+        try:
+            findings = validate_take(root)
+        except TakeError as exc:  # a layer USD cannot open: every reader refuses the take, and layers says which
+            assert [s.asset for s in statuses if s.state == "unreadable"] == [f"./{name}"], (str(exc), [s.state for s in statuses])
+            assert str(take / name) in str(exc) and "\n" not in str(exc)
+            return
+        by_file = {}
+        for f in findings:
+            if f.validator in ("facedyn:Stale", "facedyn:LayerRequires", "facedyn:LayerStack"):
+                by_file.setdefault(Path(f.file).resolve(), set()).add(f.validator)
+        for s in statuses:
+            assert s.state != "unreadable"
+            reported = by_file.get(s.path.resolve(), set())
+            expected = {"stale": {"facedyn:Stale"} if s.stale else set(), "missing": {"facedyn:LayerStack"}, "ok": set()}[s.state]
+            if s.needs:
+                expected = expected | {"facedyn:LayerRequires"}
+            assert reported == expected, (s.asset, s.state, s.reason, s.needs, reported)

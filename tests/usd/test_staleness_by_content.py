@@ -180,16 +180,23 @@ def test_attach_goes_only_to_the_root_the_step_read(tmp_path, capsys):
     assert root_b.read_bytes() == before and not (a / "stabilized.usdc").exists()
 
 
-def test_a_root_listing_itself_is_refused_until_that_entry_is_detached(tmp_path, capsys):
+def test_a_root_listing_itself_is_refused_until_that_entry_is_detached(tmp_path, capfd):
     root = build_take(tmp_path)
     layer = Sdf.Layer.OpenAsAnonymous(str(root))
     layer.subLayerPaths.append("./take.usda")
     layer.Export(str(root))
-    capsys.readouterr()
+    capfd.readouterr()
     assert cli("stabilize", root, "-o", tmp_path / "s.usdc", "--attach", root) == 2
-    assert "lists itself among its subLayers (./take.usda)" in capsys.readouterr().err
+    assert "lists itself among its subLayers (./take.usda)" in capfd.readouterr().err
     assert cli("layers", root) == 2
     assert cli("layers", root, "--mute", "./quasistatic.usdc") == 2
+    capfd.readouterr()
+    assert main(["inspect", str(root)]) == 2  # it showed the rest of the stack and exited 0, with only USD's warning
+    err = capfd.readouterr().err
+    assert "lists itself among its subLayers (./take.usda)" in err and len(err.strip().splitlines()) == 1, err
+    assert main(["validate", str(root)]) == 1  # a finding of its report, without USD's own warning (C++, on fd 2)
+    out, err = capfd.readouterr()
+    assert "ERROR facedyn:LayerStack" in out and "lists itself (./take.usda)" in out and err == "", err
     assert cli("layers", root, "--detach", "./take.usda") == 0
     assert "./take.usda" not in Sdf.Layer.OpenAsAnonymous(str(root)).subLayerPaths
     assert set(_states(root).values()) == {"ok"}
