@@ -209,3 +209,26 @@ def test_the_role_check_sees_bare_role_names():
            'if layer.role in ("preview", "x"): pass\nRole("sculpted", 25, "sculpted layers", reads="synthesized")\n'
            'OffsetStats("synthesized")\nrole = SYNTHESIZED\n')
     assert sorted(_bare_role_names(bad)) == [1, 2, 3, 4, 5]
+
+
+ALGORITHM_AND_USD_PACKAGES = ("dynamics", "stabilize", "geometry", "kernels", "io", "usd", "preview")
+
+
+def test_a_packages_public_functions_are_used_beyond_their_module():
+    """A module-level function no other module, test, benchmark, example or page names is a
+    helper: its name starts with an underscore, so a package's public names are what others use
+    (classes are left out: a public function's result types are public with it)."""
+    import re
+
+    root = PACKAGE.parent
+    texts = {path: path.read_text() for folder in ("facedyn", "tests", "benchmarks", "examples", "docs")
+             for path in (root / folder).rglob("*") if path.suffix in (".py", ".md", ".sh") and path.is_file()}
+    unused = []
+    for package in ALGORITHM_AND_USD_PACKAGES:
+        for path in sorted((PACKAGE / package).glob("*.py")):
+            for node in ast.parse(path.read_text()).body:
+                if isinstance(node, ast.FunctionDef) and not node.name.startswith("_"):
+                    named = re.compile(rf"\b{node.name}\b")
+                    if not any(named.search(text) for other, text in texts.items() if other != path):
+                        unused.append(f"{path.relative_to(root)}:{node.lineno} {node.name}")
+    assert not unused, "public functions nothing else names (make them private):\n" + "\n".join(unused)

@@ -115,7 +115,7 @@ def write_atomically(path: str | PathLike, write: Callable[[BinaryIO], None]) ->
     try:
         with os.fdopen(fd, "wb") as out:
             write(out)
-        os.chmod(tmp, new_file_mode())
+        os.chmod(tmp, _new_file_mode())
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
@@ -127,7 +127,7 @@ def _size(count: int) -> str:
     return f"{count / 2**20:.0f} MiB" if count >= 2**20 else f"{count} bytes"
 
 
-def new_file_mode() -> int:
+def _new_file_mode() -> int:
     """The permission bits an ordinary new file gets under this process's umask (0644 under 022)."""
     mask = os.umask(0)
     os.umask(mask)

@@ -80,12 +80,12 @@ def parse_timecodes(codes: Iterable[str], fps: float | None = None) -> tuple[np.
     """HH:MM:SS:FF.fff strings -> (seconds since midnight, the timecode rate used).
 
     `fps` is the timecode rate (not necessarily the capture rate: Live Link Face counts
-    60 timecode frames a second while capturing 30); None infers it, see `timecode_rate`.
+    60 timecode frames a second while capturing 30); None infers it, see `_timecode_rate`.
     """
     return _seconds(np.array([_split_timecode(code) for code in codes], dtype=np.float64).reshape(-1, 4), fps)
 
 
-def timecode_rate(whole_seconds: np.ndarray, frames: np.ndarray) -> int:
+def _timecode_rate(whole_seconds: np.ndarray, frames: np.ndarray) -> int:
     """The standard timecode rate that explains where the frame field rolls over.
 
     At a rollover the field drops by (rate - step), with `step` the typical frame advance
@@ -176,7 +176,7 @@ def _seconds(fields: np.ndarray, fps: float | None) -> tuple[np.ndarray, float]:
     """(F, 4) hours, minutes, seconds, frames -> seconds since midnight, rolling past midnight."""
     whole = fields[:, 0] * 3600 + fields[:, 1] * 60 + fields[:, 2]
     frames = fields[:, 3]
-    rate = timecode_rate(whole, frames) if fps is None else float(fps)
+    rate = _timecode_rate(whole, frames) if fps is None else float(fps)
     if not rate > 0:
         raise ValueError(f"timecode rate must be positive, got {fps}")
     if frames.size and frames.max() >= rate:

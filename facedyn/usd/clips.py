@@ -35,7 +35,7 @@ def clips_folder(path: Path, run: str) -> Path:
     return path.parent / f"{path.stem}.{run}{CLIPS_SUFFIX}"
 
 
-def declare_attributes(source: Sdf.Layer, target: Sdf.Layer, attribute_paths: list[Sdf.Path]) -> None:
+def _declare_attributes(source: Sdf.Layer, target: Sdf.Layer, attribute_paths: list[Sdf.Path]) -> None:
     """Create in `target` the attributes (as overs, with their types, no values) that `source` declares."""
     for attr_path in attribute_paths:
         prim = Sdf.CreatePrimInLayer(target, attr_path.GetPrimPath())
@@ -67,7 +67,7 @@ class ClipWriter:
     def new_clip(self) -> Sdf.Layer:
         """An empty clip layer declaring the varying attributes, to author one chunk's samples in."""
         clip = Sdf.Layer.CreateAnonymous(".usdc")
-        declare_attributes(self.layer, clip, self.varying)
+        _declare_attributes(self.layer, clip, self.varying)
         return clip
 
     def add(self, clip: Sdf.Layer, first: float, last: float) -> None:
@@ -82,7 +82,7 @@ class ClipWriter:
     def finish(self) -> None:
         """Write the manifest, author the clip set on the layer, and move the folder into place."""
         manifest = Sdf.Layer.CreateAnonymous(".usda")
-        declare_attributes(self.layer, manifest, self.varying)
+        _declare_attributes(self.layer, manifest, self.varying)
         self.export(manifest, self.staging / "manifest.usda")
         clip_set = {
             "assetPaths": Sdf.AssetPathArray(self.assets),

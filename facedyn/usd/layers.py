@@ -77,7 +77,7 @@ def write_layer(
     if first is None:
         raise TakeError("nothing to write: the layer covers no frames")
     _check_shapes(content, per_frame=False)  # the arrays are checked chunk by chunk (_checked)
-    record = provenance.record(path.parent, layer_role(provenance, content))
+    record = provenance.record(path.parent, _layer_role(provenance, content))
     layer = Sdf.Layer.CreateAnonymous(path.suffix)
     frames = np.asarray(content.frames, dtype=np.float64)
     timing.with_frames(float(frames[0]), float(frames[-1])).apply(layer)
@@ -174,7 +174,7 @@ def _author_static(mesh_prim: Usd.Prim, skull_prim: Usd.Prim, content: LayerCont
     record.write(mesh_prim)
 
 
-def layer_role(provenance: schema.Provenance, content: LayerContent) -> str:
+def _layer_role(provenance: schema.Provenance, content: LayerContent) -> str:
     """The role a layer records: the provenance's, else its processor's (older callers), else its face's."""
     name = provenance.role or LEGACY_PROCESSOR_ROLES.get(provenance.processor) or content.face.role
     if name not in roles():

@@ -29,7 +29,7 @@ class StackFile:
     is_root: bool
 
 
-def stack_files(path: str | os.PathLike) -> list[StackFile]:
+def _stack_files(path: str | os.PathLike) -> list[StackFile]:
     """path and every layer it lists (subLayers, recursively, and layers muted on disk); path first."""
     files, seen, todo = [], set(), [Path(path).resolve()]
     while todo:
@@ -64,7 +64,7 @@ def check_output_paths(
     or extends (--root, or its default).
     """
     out = Path(output).resolve()
-    stacks = {str(i): stack_files(i) for i in inputs}
+    stacks = {str(i): _stack_files(i) for i in inputs}
     for name, files in stacks.items():
         if files[0].path == out:
             raise UsageError(f"{output}: the output would overwrite the input {name}; choose another -o")
@@ -82,7 +82,7 @@ def check_output_paths(
                         f"{target}: {flag} names a data layer of the input {name}; attaching there would edit the input. "
                         "Give a take root (.usda) instead"
                     )
-        _check_not_layer_of(output, out, str(target), stack_files(target_path)[1:], role)
+        _check_not_layer_of(output, out, str(target), _stack_files(target_path)[1:], role)
     reads_a_take = root is None  # an import (which has a root of its own) reads sources, and refuses --attach itself
     if attach is not None and reads_a_take and inputs and Path(attach).resolve() not in {Path(i).resolve() for i in inputs}:
         read = ", ".join(str(i) for i in inputs)

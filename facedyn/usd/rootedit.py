@@ -38,8 +38,8 @@ LOCK_MODE = 0o644
 ACTOR_KEY = "actor"  # root customLayerData["facedyn"][ACTOR_KEY]: the take's actor asset, relative to the root
 
 
-def lock_file(root: str | os.PathLike) -> Path:
-    """The kept `.NAME.lock` file beside a take root that `root_lock` flocks."""
+def _lock_file(root: str | os.PathLike) -> Path:
+    """The kept `.NAME.lock` file beside a take root that `_root_lock` flocks."""
     root = Path(root)
     return root.parent / f".{root.name}.lock"
 
@@ -61,13 +61,13 @@ def remove_created_root(root: Path, layer: Path) -> None:
             return
         root.unlink()
     try:
-        fd = os.open(lock_file(root), os.O_RDWR)
+        fd = os.open(_lock_file(root), os.O_RDWR)
     except OSError:
         return
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         if not root.exists():
-            lock_file(root).unlink()
+            _lock_file(root).unlink()
     except OSError:
         pass  # another run holds it: its root is its own
     finally:
@@ -75,7 +75,7 @@ def remove_created_root(root: Path, layer: Path) -> None:
 
 
 @contextmanager
-def root_lock(root: str | os.PathLike) -> Iterator[None]:
+def _root_lock(root: str | os.PathLike) -> Iterator[None]:
     """Hold an exclusive advisory lock on root: flock on a kept `.NAME.lock` file beside it.
 
     Why this lock: flock belongs to the open file, so two edits in one process exclude each
@@ -87,7 +87,7 @@ def root_lock(root: str | os.PathLike) -> Iterator[None]:
     takes the same lock, not a text editor.
     """
     root = Path(root)
-    lock_path = lock_file(root)
+    lock_path = _lock_file(root)
     try:
         fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, LOCK_MODE)
     except OSError as exc:
@@ -124,7 +124,7 @@ def attach(root: str | os.PathLike, layer_path: str | os.PathLike, role_name: st
     file name; a variant becomes the strongest of its rank. A root that does not exist is
     created with `create_with`'s timing (import), else it is an error.
     """
-    with root_lock(root):
+    with _root_lock(root):
         return _attach(Path(root), Path(layer_path), role_name, create_with)
 
 
@@ -139,7 +139,7 @@ def attach_written_layer(root: str | os.PathLike, layer_path: str | os.PathLike,
     """
     root, layer_path = Path(root), Path(layer_path)
     existed = layer_path.exists()
-    with root_lock(root):
+    with _root_lock(root):
         if root.exists() or create_with is None:
             _check_editable(root)
         else:
@@ -260,7 +260,7 @@ def _editing(root: str | os.PathLike) -> Iterator[Sdf.Layer]:
     """The root, locked and read fresh; written back atomically when the block succeeds."""
     root = Path(root)
     check_take_root(root)
-    with root_lock(root):
+    with _root_lock(root):
         layer = _check_editable(root)
         yield layer
         export_atomically(layer, root)

@@ -67,11 +67,11 @@ def content_id(path: str | os.PathLike) -> str:
     path = Path(path)
     if not path.is_file():
         return ""
-    own = file_digest(path)
+    own = _file_digest(path)
     clips = _clip_files(path)
     if not clips:
         return own
-    parts = [own] + [f"{clip.name}:{file_digest(clip)}" for clip in clips]
+    parts = [own] + [f"{clip.name}:{_file_digest(clip)}" for clip in clips]
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:ID_LENGTH]
 
 
@@ -79,7 +79,7 @@ def _clip_files(path: Path) -> list[Path]:
     """The clip layers a layer written as value clips reads (facedyn.usd.clips: a folder named after its run)."""
     if not any(path.parent.glob(f"{glob_escape(path.stem)}.*{CLIPS_SUFFIX}")):
         return []  # the common case, decided without opening the layer
-    run = recorded_run(path)
+    run = _recorded_run(path)
     folder = clips_folder(path, run) if run else None
     return sorted(p for p in folder.iterdir() if p.is_file()) if folder and folder.is_dir() else []
 
@@ -89,10 +89,10 @@ def legacy_id(path: str | os.PathLike) -> str:
     path = Path(path)
     if not path.is_file():
         return ""
-    return recorded_run(path) or file_digest(path)
+    return _recorded_run(path) or _file_digest(path)
 
 
-def recorded_run(path: Path) -> str:
+def _recorded_run(path: Path) -> str:
     """The `run` in a USD layer's customLayerData["facedyn"] ("" when it is no facedyn layer)."""
     if not Sdf.FileFormat.FindByExtension(path.suffix.lstrip(".")):
         return ""
@@ -116,7 +116,7 @@ _DIGESTS: dict[tuple, str] = {}
 BLOCK = 1 << 22  # bytes hashed at a time: the file is streamed, never whole in memory
 
 
-def file_digest(path: str | os.PathLike) -> str:
+def _file_digest(path: str | os.PathLike) -> str:
     """A short sha256 of a file's bytes, streamed.
 
     Remembered for the life of the process per file identity and change time (inode, size,

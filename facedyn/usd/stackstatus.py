@@ -100,12 +100,12 @@ def check_take_root(path: str | os.PathLike) -> None:
     path = Path(path)
     if is_take_root(open_root(path)):
         return
-    roots = roots_listing(path)
+    roots = _roots_listing(path)
     hint = f"; its take root is {roots[0]}" if roots else "; give the take's root (take.usda), which lists its layers"
     raise TakeError(f"{path}: not a take root, it lists no layers{hint}")
 
 
-def roots_listing(path: Path) -> list[Path]:
+def _roots_listing(path: Path) -> list[Path]:
     """The take roots in path's folder that list it (in their subLayers or as muted)."""
     target, found = path.resolve(), []
     for candidate in sorted(path.parent.iterdir()):

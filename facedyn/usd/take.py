@@ -198,7 +198,7 @@ def read_performance(
         translate, orient = read_skull_transforms(skull_prim, time_codes)
         skull = schema.SkullAttributes.read(skull_prim)
         landmarks = skull.landmarks
-        solve_error = read_float_samples(skull_prim.GetAttribute(schema.SOLVE_ERROR_ATTR), time_codes)
+        solve_error = _read_float_samples(skull_prim.GetAttribute(schema.SOLVE_ERROR_ATTR), time_codes)
     return Performance(
         points=points,
         frames=time_codes,
@@ -263,7 +263,7 @@ def read_vec3_samples(attr: Usd.Attribute, time_codes: np.ndarray, where: str) -
     return out
 
 
-def read_float_samples(attr: Usd.Attribute, time_codes: np.ndarray) -> np.ndarray | None:
+def _read_float_samples(attr: Usd.Attribute, time_codes: np.ndarray) -> np.ndarray | None:
     if not attr or not attr.HasAuthoredValue():
         return None
     query = Usd.AttributeQuery(attr)
@@ -319,7 +319,7 @@ def read_uvs(mesh: UsdGeom.Mesh) -> UVs | None:
     return UVs(values=values, indices=indices, interpolation=str(primvar.GetInterpolation()))
 
 
-def ensure_finite(values: np.ndarray, time_codes: np.ndarray, where: str) -> None:
+def _ensure_finite(values: np.ndarray, time_codes: np.ndarray, where: str) -> None:
     finite = np.isfinite(values).all(axis=(1, 2))
     if not finite.all():
         bad = int(np.argmin(finite))
@@ -332,7 +332,7 @@ MIN_EXTENT_CM = 1e-4  # a frame whose points all coincide (to 1 µm) has no shap
 
 def ensure_plausible_points(points: np.ndarray, time_codes: np.ndarray, where: str) -> None:
     """Finite, and frames that are a shape in centimetres: not collapsed to a point, not astronomically far."""
-    ensure_finite(points, time_codes, where)
+    _ensure_finite(points, time_codes, where)
     bounds = frame_extents(points)  # (F, 2, 3) per-frame lows and highs: one fast pass per coordinate
     far = np.abs(bounds).max(axis=(1, 2)) > MAX_COORDINATE_CM
     if far.any():

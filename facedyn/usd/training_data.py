@@ -38,7 +38,7 @@ def take_roots(inputs: list[Path]) -> list[Path]:
 
 def read_training_take(root: Path, skull: str = "take", frames=None) -> tuple[Performance, TakeSource]:
     """A take with its skull solved: the take's own (it must be stabilized) or the simulator's truth."""
-    stage, path = training_stage(root, skull)
+    stage, path = _training_stage(root, skull)
     perf, source = read_stage(stage, path, frames=frames)
     _check_stabilized(path, perf, skull)
     return perf, source
@@ -47,7 +47,7 @@ def read_training_take(root: Path, skull: str = "take", frames=None) -> tuple[Pe
 def read_training_head(root: Path, skull: str = "take") -> tuple[Performance, int]:
     """(the take's first frame as read_training_take reads it, its frame count): what a trainer
     checks and sets up from before it reads each take's frames in turn."""
-    stage, path = training_stage(root, skull)
+    stage, path = _training_stage(root, skull)
     time_codes = select_time_codes(stage, find_face_mesh(stage), None)
     first = float(time_codes[0])
     head, _ = read_stage(stage, path, frames=(first, first))
@@ -55,7 +55,7 @@ def read_training_head(root: Path, skull: str = "take") -> tuple[Performance, in
     return head, len(time_codes)
 
 
-def training_stage(root: Path, skull: str) -> tuple[Usd.Stage, Path]:
+def _training_stage(root: Path, skull: str) -> tuple[Usd.Stage, Path]:
     """(the stage a trainer reads the take from, the path that names it): the take below its
     removal, or the capture under the simulator's true skull."""
     if skull not in SKULL_SOURCES:

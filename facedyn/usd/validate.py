@@ -47,24 +47,24 @@ def validate_take(path: str | os.PathLike) -> list[Finding]:
     except TakeError:
         itself = None  # an unreadable root: open_stage names it
     if itself is not None:
-        return stack_findings(Path(path))
+        return _stack_findings(Path(path))
     stage = open_stage(path)
-    findings = usd_findings(stage)
+    findings = _usd_findings(stage)
     if is_take_root(stage.GetRootLayer()):
-        findings += stack_findings(Path(path))
-    findings += timing_findings(stage)
+        findings += _stack_findings(Path(path))
+    findings += _timing_findings(stage)
     try:
         face = find_face_mesh(stage)
     except TakeError as exc:
         findings.append(Finding("error", "facedyn:FaceMesh", str(exc)))
     else:
-        findings += face_findings(stage, face)
+        findings += _face_findings(stage, face)
     for finding in findings:
         finding.file = finding.file or layer_name(stage)
     return findings
 
 
-def usd_findings(stage: Usd.Stage) -> list[Finding]:
+def _usd_findings(stage: Usd.Stage) -> list[Finding]:
     registry = UsdValidation.ValidationRegistry()
     validators = [v for v in registry.GetOrLoadAllValidators() if v.GetMetadata().name not in _SKIPPED_USD_VALIDATORS]
     errors = UsdValidation.ValidationContext(validators).Validate(stage)
@@ -81,7 +81,7 @@ def usd_findings(stage: Usd.Stage) -> list[Finding]:
     return findings
 
 
-def stack_findings(root: Path) -> list[Finding]:
+def _stack_findings(root: Path) -> list[Finding]:
     """The root's layers: listed once, present, in role order, covering the take, fed by what they read, fresh."""
     findings = []
     seen = {}
@@ -118,7 +118,7 @@ def _layer_finding(status, severity: str, validator: str, message: str) -> Findi
     return Finding(severity, validator, message, str(status.path))
 
 
-def timing_findings(stage: Usd.Stage) -> list[Finding]:
+def _timing_findings(stage: Usd.Stage) -> list[Finding]:
     """The take is in centimetres, Y up, and every layer that states a rate states the root's rate."""
     root = stage.GetRootLayer()
     expected = (stage.GetTimeCodesPerSecond(), stage.GetFramesPerSecond())
@@ -139,7 +139,7 @@ def timing_findings(stage: Usd.Stage) -> list[Finding]:
     return findings
 
 
-def face_findings(stage: Usd.Stage, face: Usd.Prim) -> list[Finding]:
+def _face_findings(stage: Usd.Stage, face: Usd.Prim) -> list[Finding]:
     where = str(face.GetPath())
     mesh = UsdGeom.Mesh(face)
     points_attr = mesh.GetPointsAttr()
@@ -189,11 +189,11 @@ def face_findings(stage: Usd.Stage, face: Usd.Prim) -> list[Finding]:
         findings.append(Finding("error", "facedyn:Offsets", f"{where}: {n_off} dynamicsOffset values for {n_pts} points at time {t:g}"))
     for finding in findings:
         finding.prim = finding.prim or where
-    findings += skull_findings(face.GetParent(), frames)
+    findings += _skull_findings(face.GetParent(), frames)
     return findings
 
 
-def skull_findings(skull: Usd.Prim, frames: list[float]) -> list[Finding]:
+def _skull_findings(skull: Usd.Prim, frames: list[float]) -> list[Finding]:
     """The skull's transform reads as the readers read it: a value at every frame of the face, unit quaternions."""
     if not skull.HasAPI(schema.SKULL_API):
         return []
