@@ -53,7 +53,7 @@ def arkit_rig(ict_path: Path = ICT, target: int = TARGET) -> FaceRig:
     """The ARKit-named rig decimated from the ICT rig at `ict_path` (see the module's docstring)."""
     from scipy.spatial import cKDTree
 
-    from facedyn.usd.rig import read_blendshape_rig
+    from facedyn.usd.blendshape_rig import read_blendshape_rig
 
     ict = read_blendshape_rig(ict_path)
     keep, faces = decimated(ict.neutral, ict.topology.triangles(), target)
@@ -88,7 +88,7 @@ def main() -> None:
     parser.add_argument("--points", type=int, default=TARGET, help="about how many points")
     parser.add_argument("--ict", type=Path, default=ICT, help="the ICT-FaceKit rig")
     args = parser.parse_args()
-    from facedyn.usd.rig import write_blendshape_rig
+    from facedyn.usd.blendshape_rig import write_blendshape_rig
 
     rig = arkit_rig(args.ict, args.points)
     args.output.parent.mkdir(parents=True, exist_ok=True)

@@ -78,7 +78,7 @@ def build_take(folder: Path, frames: int, rig_path: Path):
     from facedyn.dynamics.modelfile import DynamicsModel, save_model
     from facedyn.dynamics.network import Network, removal_spec
     from facedyn.dynamics.stretch import UVNeighbourhoods
-    from facedyn.usd.rig import read_blendshape_rig
+    from facedyn.usd.blendshape_rig import read_blendshape_rig
 
     rig = read_blendshape_rig(rig_path)
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, sample_count=SAMPLES)

@@ -39,7 +39,7 @@ def main() -> None:
 def measure(record: Recorder, args) -> None:
     """Each take simulated alone, the corpus on every core, then the loudest take written and pictured."""
     if args.rig:
-        from facedyn.usd.rig import read_blendshape_rig
+        from facedyn.usd.blendshape_rig import read_blendshape_rig
 
         rig = read_blendshape_rig(args.rig)
     else:

@@ -472,7 +472,7 @@ def main() -> None:
     args = arguments.parse_args()
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data (Live Link speech, CMU mocap) is needed")
-    from facedyn.usd.rig import write_blendshape_rig
+    from facedyn.usd.blendshape_rig import write_blendshape_rig
 
     rig = default_face()
     fv = rig.face_vertices

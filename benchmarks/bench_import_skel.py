@@ -1,7 +1,7 @@
 """`usdfacedyn import` of a UsdSkel rig in bounded memory: peak RSS and speed on long takes.
 
 The source is the built-in 4,058-point face (facedyn.sim.default_face) written as a
-blend-shape rig (facedyn.usd.rig.write_blendshape_rig: a SkelRoot, the Face mesh, 32 blend
+blend-shape rig (facedyn.usd.blendshape_rig.write_blendshape_rig: a SkelRoot, the Face mesh, 32 blend
 shapes), and a performance layer over it (sublayered, as a capture solver delivers it): a
 Skeleton of one joint bound to the face and a SkelAnimation keying every frame the 27
 expression weights and the joint's translation and rotation (the head moving), saved chunk
@@ -31,7 +31,7 @@ def write_skel_take(folder: Path, count: int) -> Path:
     """performance.usdc (over rig.usdc): `count` frames of expression weights and head motion from frame 1001."""
     from pxr import Gf, Sdf, Usd, UsdSkel, Vt
 
-    from facedyn.usd.rig import write_blendshape_rig
+    from facedyn.usd.blendshape_rig import write_blendshape_rig
 
     face = built_in_face()
     rig = write_blendshape_rig(face, folder / "rig.usdc")

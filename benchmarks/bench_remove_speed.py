@@ -75,7 +75,7 @@ def mesh(rig_arg: str):
     """(rig or None, points, topology, face setup): the ICT rig when there is one, else the sheet."""
     path = Path(rig_arg) if rig_arg != "sheet" else None
     if path is not None and path.is_file():
-        from facedyn.usd.rig import read_blendshape_rig
+        from facedyn.usd.blendshape_rig import read_blendshape_rig
 
         rig = read_blendshape_rig(path)
         face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, sample_count=SAMPLES)

@@ -41,7 +41,7 @@ def grid_face(n: int = 106, size: float = 16.0, radius: float = 12.0):
 
 
 def ict_face():
-    from facedyn.usd.rig import read_blendshape_rig
+    from facedyn.usd.blendshape_rig import read_blendshape_rig
 
     rig = read_blendshape_rig(ICT_RIG)
     return rig.neutral.astype(np.float64), rig.topology.triangles(), rig.rigid_weights

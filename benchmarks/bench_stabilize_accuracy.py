@@ -52,7 +52,7 @@ def main() -> None:
     arguments.add_argument("--seconds", type=float, help="--plain: cut every take to at most this long (default: as defined)")
     args = arguments.parse_args()
     if args.rig:
-        from facedyn.usd.rig import read_blendshape_rig
+        from facedyn.usd.blendshape_rig import read_blendshape_rig
 
         rig = read_blendshape_rig(args.rig)
     else:

@@ -24,7 +24,7 @@ ICT_RIG = Path(__file__).resolve().parents[2] / "shared" / "data" / "ict-facekit
 
 
 def ict_frames(frames: int, samples: int):
-    from facedyn.usd.rig import read_blendshape_rig
+    from facedyn.usd.blendshape_rig import read_blendshape_rig
 
     rig = read_blendshape_rig(ICT_RIG)
     chosen = farthest_point_samples(rig.neutral, rig.topology.triangles(), samples, rig.face_vertices)

@@ -49,7 +49,7 @@ import torch
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
-from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
+from facedyn.dynamics.root_motion import align_trajectory, delta_transfer, skull_correspondence
 from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
 from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
 from facedyn.processors.corpus_writer import load_rig

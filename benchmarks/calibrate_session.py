@@ -106,7 +106,7 @@ def reimport(out: Path) -> int:
 
 def make_session(out: Path, data: Path, expressions: int, jobs: int) -> dict:
     """The session in `out` (see the module's docstring); its recipe and timings."""
-    from facedyn.usd.rig import write_blendshape_rig
+    from facedyn.usd.blendshape_rig import write_blendshape_rig
 
     out.mkdir(parents=True, exist_ok=True)
     rig = arkit_rig()

@@ -2,7 +2,7 @@
 
 A `FaceRig` is a neutral mesh plus expression offsets (driven by ARKit-style curves) and
 identity modes (which make new actors). It is data, not simulation, and plain NumPy:
-`facedyn.usd.rig` reads and writes it as a UsdSkel blend-shape rig (so `actor` and the
+`facedyn.usd.blendshape_rig` reads and writes it as a UsdSkel blend-shape rig (so `actor` and the
 corpus files read a rig without loading the simulator), `facedyn.sim.default_face` builds
 one in code, and the simulator (`facedyn.sim`) drives it.
 

@@ -119,7 +119,7 @@ def actor_rig(spec: ActorSpec, data: Path) -> FaceRig:
 
         base = default_face()
     elif spec.face == "ict":
-        from facedyn.usd.rig import read_blendshape_rig
+        from facedyn.usd.blendshape_rig import read_blendshape_rig
 
         base = read_blendshape_rig(data / "ict-facekit" / "ict_face_rig.usdc")
     else:
@@ -133,7 +133,7 @@ def generate_actor(spec: ActorSpec, out: Path, data: Path, which: tuple[str, ...
                    jobs: int = 1, progress=print) -> Path:
     """Write the actor folder `out` (atomically: a temporary folder renamed into place); `jobs`
     takes at a time in worker processes (each simulation is one sequential loop on one core)."""
-    from facedyn.usd.rig import write_blendshape_rig
+    from facedyn.usd.blendshape_rig import write_blendshape_rig
 
     if out.exists():
         raise FileExistsError(f"{out}: already exists (remove it to generate the actor again)")

@@ -14,7 +14,7 @@ _PUBLIC = {
     "MIN_ROWS": "response", "RIDGES": "response", "fit_linear_response": "response", "is_linear_response": "response",
     "remove_left_out": "response", "remove_with_response": "response", "response_template": "response",
     "settled_frames": "response",
-    "align_trajectory": "retarget", "delta_transfer": "retarget", "skull_correspondence": "retarget",
+    "align_trajectory": "root_motion", "delta_transfer": "root_motion", "skull_correspondence": "root_motion",
     "held_expression_spread": "diagnostics", "motion_left_beyond_sag": "diagnostics",
     "BandWeights": "bands", "BandWeightsFit": "bands",
     "FaceSetup": "face",

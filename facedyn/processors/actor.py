@@ -78,7 +78,7 @@ def _actor(name: str, source: str, sample_count: int, **fields):
 
 def _from_rig(path: Path, params: dict, name: str):
     from facedyn.rig import alignment_vertices
-    from facedyn.usd.rig import read_blendshape_rig
+    from facedyn.usd.blendshape_rig import read_blendshape_rig
 
     rig = read_blendshape_rig(path, params["mesh"] or None)
     return _actor(name, "rig", params["samples"], neutral=rig.neutral, topology=rig.topology, uvs=rig.uvs,

@@ -92,7 +92,7 @@ class CalibrateProcessor(Processor):
         from facedyn.processors.training_inputs import take_name, take_skull_frame
         from facedyn.usd.errors import TakeError
         from facedyn.usd.frames import TakeFrames
-        from facedyn.usd.rig import read_blendshape_rig
+        from facedyn.usd.blendshape_rig import read_blendshape_rig
         from facedyn.usd.training_data import take_roots
 
         params = request.params

@@ -27,7 +27,7 @@ def load_rig(path: Path | None, actor_seed: int | None = None):
 
         rig = default_face()
     else:
-        from facedyn.usd.rig import read_blendshape_rig
+        from facedyn.usd.blendshape_rig import read_blendshape_rig
 
         rig = read_blendshape_rig(path)
     return rig if actor_seed is None else rig.make_actor(seed=actor_seed)

@@ -135,7 +135,7 @@ class Demo:
 
     def make_actor(self, rig) -> Path:
         """The rig as a UsdSkel file and the actor made from it, as a studio makes its actor."""
-        from facedyn.usd.rig import write_blendshape_rig
+        from facedyn.usd.blendshape_rig import write_blendshape_rig
 
         rig_path = self.rig_path or write_blendshape_rig(rig, self.output / "rig.usda")
         actor = self.output / "actor.usda"

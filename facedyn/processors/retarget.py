@@ -1,7 +1,7 @@
 """The retarget processor: actor A's root motion onto actor B's quasistatic performance.
 
 `--method synthesis` (default, the paper's): A's skull trajectory is moved into B's skull
-space (facedyn.dynamics.retarget.align_trajectory) and B's own synthesis model makes B's
+space (facedyn.dynamics.root_motion.align_trajectory) and B's own synthesis model makes B's
 dynamics for it. `--method delta-transfer`, the paper's naive baseline: A's per-vertex
 offsets copied onto B. Both takes stream through in chunks (only the skull trajectories,
 7 numbers a frame, are read whole), with the model's context frames, as in synthesize.
@@ -65,7 +65,7 @@ class RetargetProcessor(Processor):
         return Plan(description, (reader, model, a, params))
 
     def run(self, plan: Plan, progress: Progress) -> LayerOutput:
-        from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
+        from facedyn.dynamics.root_motion import align_trajectory, delta_transfer, skull_correspondence
         from facedyn.dynamics.synthesis import synthesize_dynamics
         from facedyn.usd.runs import read_elsewhere
 

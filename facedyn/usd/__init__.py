@@ -15,7 +15,7 @@ _PUBLIC = {
     "TakeFrames": "frames",
     "describe_take": "inspect", "format_description": "inspect",
     "LayerContent": "layers",
-    "read_blendshape_rig": "rig", "write_blendshape_rig": "rig",
+    "read_blendshape_rig": "blendshape_rig", "write_blendshape_rig": "blendshape_rig",
     "content_id": "runs",
     "open_mesh_source": "source", "read_usd_mesh": "source",
     "stack_status": "stackstatus",

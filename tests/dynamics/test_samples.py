@@ -125,7 +125,7 @@ def test_skin_region_keeps_the_face_piece():
 
 def test_ict_samples_build_their_stretch_stencils(shared_data):
     from facedyn.dynamics.stretch import UVNeighbourhoods
-    from facedyn.usd.rig import read_blendshape_rig
+    from facedyn.usd.blendshape_rig import read_blendshape_rig
 
     rig = read_blendshape_rig(shared_data / "ict-facekit" / "ict_face_rig.usdc")
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, uvs=rig.uvs)

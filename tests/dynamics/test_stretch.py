@@ -229,7 +229,7 @@ def ict(shared_data):
     path = shared_data / "ict-facekit" / "ict_face_rig.usdc"
     if not path.is_file():
         pytest.skip(f"the ICT rig is not at {path}")
-    rig_io = pytest.importorskip("facedyn.usd.rig", reason="facedyn.usd.rig (the rig reader) is not in this checkout")
+    rig_io = pytest.importorskip("facedyn.usd.blendshape_rig", reason="facedyn.usd.blendshape_rig (the rig reader) is not in this checkout")
     from facedyn.dynamics.samples import farthest_point_samples
 
     rig = rig_io.read_blendshape_rig(path)

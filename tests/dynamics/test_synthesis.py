@@ -9,7 +9,7 @@ from facedyn.dynamics.features import skull_velocities
 from facedyn.dynamics.modelfile import DynamicsModel, ModelMismatch, load_model, save_model
 from facedyn.dynamics.network import Network, removal_spec
 from facedyn.dynamics.removal import remove_dynamics
-from facedyn.dynamics.retarget import align_trajectory, delta_transfer, skull_correspondence
+from facedyn.dynamics.root_motion import align_trajectory, delta_transfer, skull_correspondence
 from facedyn.dynamics.skull import to_world
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods

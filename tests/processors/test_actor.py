@@ -6,7 +6,7 @@ from facedyn.cli import main
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
 from facedyn.usd.actor_asset import read_actor
-from facedyn.usd.rig import write_blendshape_rig
+from facedyn.usd.blendshape_rig import write_blendshape_rig
 from facedyn.usd.take import read_take
 
 from usd_fixtures import write_mesh_cache

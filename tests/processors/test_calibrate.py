@@ -12,7 +12,7 @@ from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
 from facedyn.sim.tissue import TissueParams
 from facedyn.processors.corpus_writer import build_corpus
-from facedyn.usd.rig import write_blendshape_rig
+from facedyn.usd.blendshape_rig import write_blendshape_rig
 
 SESSION = [("smile", "platform:6"), ("smile", "walk"), ("jaw_open", "platform:9"), ("jaw_open", "hop")]
 TISSUE = TissueParams(soft_hz=6.5, damping_ratio=0.15)  # the actor's own, not the corpus's family

@@ -9,7 +9,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdSkel
 from facedyn.sim.default_face import default_face
 from facedyn.rig import LANDMARK_NAMES
 from facedyn.usd.errors import TakeError
-from facedyn.usd.rig import read_blendshape_rig, write_blendshape_rig
+from facedyn.usd.blendshape_rig import read_blendshape_rig, write_blendshape_rig
 
 ICT = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "ict-facekit" / "ict_face_rig.usdc"
 needs_ict = pytest.mark.skipif(not ICT.is_file(), reason=f"ICT-FaceKit rig not found at {ICT} (../shared/data)")
