@@ -119,22 +119,22 @@ def _vertex_response(world: np.ndarray, translate: np.ndarray, orient: np.ndarra
     both in the frame and band-passed to BAND_HZ (least squares over the frames and axes), a block of vertices at a time.
 
     The acceleration at a rest point p is R(t)^T (R''(t) p + T''(t)) = A(t) p + b(t), linear in p,
-    and so are the band-pass and the derivative: the frame's twelve channels of A and b are
-    filtered once, not three per vertex, which halves the filtering (each vertex's
-    displacement is still its own)."""
+    and so are the band-pass and the derivative: the frame's twelve channels of A and b go
+    through the filter beside the vertices' displacements, not three more channels per vertex."""
     rot = quaternion.to_matrix(orient)
     band = butter_bandpass(BAND_HZ[0], min(BAND_HZ[1], fps / 4.0), fps)
     second = np.gradient(np.gradient(np.concatenate([rot.reshape(-1, 9), translate], axis=1), axis=0), axis=0) * (fps * fps)
     frame = np.concatenate([np.einsum("fji,fjk->fik", rot, second[:, :9].reshape(-1, 3, 3)).reshape(-1, 9),
                             np.einsum("fji,fj->fi", rot, second[:, 9:])], axis=1)  # A(t), b(t) in the frame
-    frame = filtfilt(band, frame)
-    frame_jerk = np.gradient(frame, axis=0) * fps
     fields = np.empty((3, len(vertices)))
     for start in range(0, len(vertices), block):
         used = vertices[start:start + block]
         points = np.asarray(rest, dtype=np.float64)[used]
-        acceleration, jerk = (np.einsum("fij,nj->fni", f[:, :9].reshape(-1, 3, 3), points) + f[:, None, 9:] for f in (frame, frame_jerk))
-        displacement = filtfilt(band, np.einsum("fji,fnj->fni", rot, world[:, used] - translate[:, None]) - points)
+        displacement = np.einsum("fji,fnj->fni", rot, world[:, used] - translate[:, None]) - points
+        filtered = filtfilt(band, np.concatenate([displacement.reshape(len(rot), -1), frame], axis=1))  # one pass for both
+        displacement, a_b = filtered[:, :-12].reshape(displacement.shape), filtered[:, -12:]
+        acceleration, jerk = (np.einsum("fij,nj->fni", f[:, :9].reshape(-1, 3, 3), points) + f[:, None, 9:]
+                              for f in (a_b, np.gradient(a_b, axis=0) * fps))
         fields[:, start:start + len(used)] = _fit(displacement, acceleration, jerk)
     return Response(*fields)
 
