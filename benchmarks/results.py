@@ -110,6 +110,7 @@ def testset_records(folder: Path) -> list[dict]:
             flags = (f" --removal {run['removal']}" if run.get("removal") else "") + (f" --blend {run['blend']}" if run.get("blend") else "")
             flags += " --no-actor" if run.get("stabilized") == "without --actor" else ""
             flags += f" --synthesis {run['synthesis']}" if run.get("synthesis") else ""
+            flags += f" --transfer {run['transfer']}" if run.get("transfer") else ""
             records.append({
                 "benchmark": "testset", "id": f"testset-{path.stem}",
                 "case": f"{run['actor']} ({run['split']} actor), removal: {run.get('removal') or 'none'}, stabilized {run.get('stabilized', 'with --actor')}",

@@ -70,11 +70,12 @@ def main() -> None:
     if args.synthesis is not None and (args.removal is None or args.no_actor):
         sys.exit("--synthesis needs --removal (synthesis and retargeting start from the removal's quasistatic takes) and the actor's "
                  "frame (not --no-actor)")
-    transfers = transfer_takes(args.transfer or args.actor, args.actor, tests) if args.synthesis is not None else []
+    transfers = read_transfer_recipes(args.transfer or args.actor, args.actor, tests) if args.synthesis is not None else []
     run = {"actor": info["actor"]["name"], "split": info["actor"]["split"], "commit": commit(),
            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
            "cpus": os.cpu_count(), "removal": args.removal and str(args.removal), "blend": args.blend and str(args.blend),
            "stabilized": "without --actor" if args.no_actor else "with --actor", "synthesis": args.synthesis and str(args.synthesis),
+           "transfer": args.transfer and str(args.transfer),
            **({"note": args.note} if args.note else {}), "takes": []}
     with tempfile.TemporaryDirectory(prefix="facedyn-testset-") as scratch:
         work = args.work or Path(scratch)
@@ -127,7 +128,7 @@ def reload_layers(*paths: Path) -> None:
             layer.Reload(force=True)
 
 
-def transfer_takes(folder: Path, actor: Path, tests: list[str]) -> list[dict]:
+def read_transfer_recipes(folder: Path, actor: Path, tests: list[str]) -> list[dict]:
     """The transfer takes' recipes in `folder` (an actor folder of the same actor as `actor`,
     both of whose sources are `tests`); exits with the reason where there are none."""
     info_path = folder / "actor.json"

@@ -132,7 +132,8 @@ def _vertex_response(world: np.ndarray, translate: np.ndarray, orient: np.ndarra
         points = np.asarray(rest, dtype=np.float64)[used]
         displacement = np.einsum("fji,fnj->fni", rot, world[:, used] - translate[:, None]) - points
         filtered = filtfilt(band, np.concatenate([displacement.reshape(len(rot), -1), frame], axis=1))  # one pass for both
-        displacement, a_b = filtered[:, :-12].reshape(displacement.shape), filtered[:, -12:]
+        channels = filtered.shape[1] - frame.shape[1]
+        displacement, a_b = filtered[:, :channels].reshape(displacement.shape), filtered[:, channels:]
         acceleration, jerk = (np.einsum("fij,nj->fni", f[:, :9].reshape(-1, 3, 3), points) + f[:, None, 9:]
                               for f in (a_b, np.gradient(a_b, axis=0) * fps))
         fields[:, start:start + len(used)] = _fit(displacement, acceleration, jerk)
