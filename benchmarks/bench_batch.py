@@ -24,7 +24,8 @@ from facedyn.batch.cluster import open_client, run_steps
 from facedyn.batch.plan import Models, plan_batch
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import save_model
-from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
+from facedyn.dynamics.training import TrainConfig, train_removal
+from facedyn.dynamics.training_sequence import TrainingSequence
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
 from facedyn.usd.corpus_files import write_simulated_take

@@ -37,7 +37,8 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
 from facedyn.dynamics.targets import dynamic_offsets
-from facedyn.dynamics.training import TARGETS, TrainingSequence, TrainConfig, train_removal
+from facedyn.dynamics.training import TARGETS, TrainConfig, train_removal
+from facedyn.dynamics.training_sequence import TrainingSequence
 from facedyn.processors.corpus_writer import load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, SPEECH, TakeSpec, held_expressions, simulate_takes

@@ -218,10 +218,10 @@ def measure(args, record: Recorder) -> None:
     start = time.perf_counter()
     response = linear_response(face, skull_points, translate, orient)
     fit_s = time.perf_counter() - start
-    alone = best_of(lambda: remove_with_response(skull_points, translate, orient, FPS, response, device="cpu"), args.repeats)
+    alone = best_of(lambda: remove_with_response(skull_points, translate, orient, FPS, response), args.repeats)
     blended = best_of(lambda: BandWeights.mean(2).combine([remove_dynamics(skull_points, translate, orient, FPS, model, "auto"),
-                                                           remove_with_response(skull_points, translate, orient, FPS, response,
-                                                                                device="cpu")], FPS), args.repeats)
+                                                           remove_with_response(skull_points, translate, orient, FPS, response)],
+                                                          FPS), args.repeats)
     emit(record, {"case": "removal_linear_response", "mesh": mesh_name, "points": len(points), "samples": SAMPLES, "frames": args.frames,
                   "seconds": alone, "frames_per_s": args.frames / alone, "blend_with_f_seconds": blended, "blend_with_f_frames_per_s": args.frames / blended,
                   "target_frames_per_s": 300, "one_off_fit_s": fit_s, "temporal_kernels": response.info["calibration"]["temporal_kernels"]})

@@ -31,7 +31,7 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import DynamicsModel
 from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec
 from facedyn.dynamics.skull_motion import SkullMotionInput
-from facedyn.dynamics.training import TrainingSequence
+from facedyn.dynamics.training_sequence import TrainingSequence
 from facedyn.geometry import quaternion
 
 ROWS, COLS, FPS, SAMPLES, SECONDS = 54, 50, 120.0, 344, 4.5

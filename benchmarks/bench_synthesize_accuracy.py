@@ -50,8 +50,10 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull_motion import NAMED as SKULL_INPUTS
 from facedyn.dynamics.root_motion import align_trajectory, delta_transfer, skull_correspondence
-from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
-from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
+from facedyn.dynamics.synthesis import synthesize_dynamics
+from facedyn.dynamics.synthesis_training import synthesis_config, train_synthesis
+from facedyn.dynamics.training import TrainConfig, train_removal
+from facedyn.dynamics.training_sequence import TrainingSequence
 from facedyn.processors.corpus_writer import load_rig
 from facedyn.evaluation import residual_fraction
 from facedyn.sim.corpus import PERFORMANCES, PLATFORM_HZ, TakeSpec, held_expressions, simulate_take, simulate_takes

@@ -35,7 +35,8 @@ from facedyn.dynamics.network import SYNTHESIS_HIDDEN, Network, NetworkSpec, rem
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.stretch import UVNeighbourhoods, difference_lengths, stretch_features
 from facedyn.dynamics.skull_motion import SkullMotionInput
-from facedyn.dynamics.synthesis import FrameSet, stretch_arrays, synthesis_config, synthesize_dynamics
+from facedyn.dynamics.synthesis import stretch_arrays, synthesize_dynamics
+from facedyn.dynamics.synthesis_training import FrameSet, synthesis_config
 from facedyn.dynamics.training import fit
 from facedyn.kernels import runtime
 from facedyn.performance import UVs
@@ -89,11 +90,9 @@ def bench_synthesis(args, backends, record: Recorder) -> None:
     lengths = model.arrays["stretch/neutral_lengths"]
     b = model.skull_motion.features(translate, orient, face.landmarks, FPS)
     s = stretch_features(quasistatic, nb, lengths, "numpy")
-    device = next(model.network.parameters()).device  # where synthesize_dynamics put H
-    inputs = torch.from_numpy(np.concatenate([b, s.reshape(args.frames, -1)], axis=1)).to(device)
-    with torch.inference_mode():
-        d = model.network(inputs).cpu().numpy().reshape(args.frames, SAMPLES, 3)
-        network_s = best_of(lambda: model.network(inputs).cpu(), args.repeats)  # .cpu() waits for the GPU
+    inputs = np.concatenate([b, s.reshape(args.frames, -1)], axis=1)
+    d = model.weights.forward(inputs).reshape(args.frames, SAMPLES, 3)  # H in NumPy, as synthesize runs it without a GPU
+    network_s = best_of(lambda: model.weights.forward(inputs), args.repeats)
     offsets = np.empty_like(quasistatic)
     stages = {
         "skull_features": best_of(lambda: model.skull_motion.features(translate, orient, face.landmarks, FPS), args.repeats),
@@ -102,13 +101,13 @@ def bench_synthesis(args, backends, record: Recorder) -> None:
         "propagation": best_of(lambda: propagator.apply_into(d, offsets), args.repeats),
         "add_offsets": best_of(lambda: quasistatic + offsets, args.repeats),
     }
-    emit(record, {"case": "synthesize_stages", "stretch_backend": "numpy", "network_device": str(device), "frames": args.frames, "points": len(points),
+    emit(record, {"case": "synthesize_stages", "stretch_backend": "numpy", "network_device": "numpy", "frames": args.frames, "points": len(points),
                   "seconds": {k: round(v, 5) for k, v in stages.items()}})
 
     start = time.perf_counter()
     response = linear_response(face, skull_points, translate, orient, template=model)
     fit_s = time.perf_counter() - start
-    seconds = best_of(lambda: synthesize_dynamics(quasistatic, translate, orient, FPS, response, device="cpu"), args.repeats)
+    seconds = best_of(lambda: synthesize_dynamics(quasistatic, translate, orient, FPS, response), args.repeats)
     emit(record, {"case": "synthesize_linear_response", "points": len(points), "samples": SAMPLES, "frames": args.frames, "seconds": seconds,
                   "frames_per_s": args.frames / seconds, "target_frames_per_s": 300, "one_off_fit_s": fit_s})
 

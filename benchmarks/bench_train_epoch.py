@@ -37,7 +37,8 @@ def child(corpus: list[Path], epochs: int, subsample: float, batch_size: int, re
 
     from facedyn.dynamics.face import FaceSetup
     from facedyn.dynamics.skull_motion import NAMED
-    from facedyn.dynamics.training import TrainConfig, TrainingSequence, train_removal
+    from facedyn.dynamics.training import TrainConfig, train_removal
+    from facedyn.dynamics.training_sequence import TrainingSequence
     from facedyn.usd.corpus_files import read_truth
     from facedyn.usd.training_data import read_training_take, take_roots
 

@@ -66,8 +66,9 @@ def child(corpus: Path, count: int, network: str, resident_mib: int, epochs: int
 
     from facedyn.dynamics.face import FaceSetup
     from facedyn.dynamics.skull_motion import SkullMotionInput
-    from facedyn.dynamics.synthesis import synthesis_config, train_synthesis
-    from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
+    from facedyn.dynamics.synthesis_training import synthesis_config, train_synthesis
+    from facedyn.dynamics.training import TrainConfig, train_removal
+    from facedyn.dynamics.training_sequence import TrainingSequence
     from facedyn.usd.corpus_files import read_truth
     from facedyn.usd.training_data import read_training_take, take_roots
 

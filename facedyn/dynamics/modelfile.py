@@ -18,10 +18,11 @@ opened, the header size and every declared count (arrays, dimensions, layers, wi
 bounded, the array table must tile the file exactly, and the architecture must match the
 arrays present before a network is allocated, so a file can never make facedyn allocate
 much more than its own size. Loading reads each array once, straight into an array of its
-own, hashing the bytes as they arrive, and the network takes those arrays over as its
-weights without a copy (built on torch's meta device, never initialized), so a load's peak
-is about the arrays themselves (benchmarks/bench_model_load_memory.py); `describe_model`
-(`usdfacedyn inspect MODEL`) checks everything but builds no network and imports no torch.
+own, hashing the bytes as they arrive, and the model's network is those arrays
+(facedyn.dynamics.network_weights: applied in NumPy, torch not imported; the torch module
+built from them without a copy, `DynamicsModel.torch_network`, only to train or use a GPU),
+so a load's peak is about the arrays themselves (benchmarks/bench_model_load_memory.py);
+`describe_model` (`usdfacedyn inspect MODEL`) checks everything and builds nothing.
 Version 2 stores SHA-256 checksums of the metadata (its canonical JSON) and of the arrays
 (their table and bytes), verified on every load, so a damaged or edited file (flipped
 weight signs, a changed frame rate) is refused. They detect changes, they do not authenticate an author. Version 1 files, written before
@@ -58,6 +59,7 @@ import numpy as np
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.netspec import NetworkSpec
+from facedyn.dynamics.network_weights import NetworkWeights
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.errors import FacedynError
 from facedyn.io.errors import InputError, quoted
@@ -104,7 +106,7 @@ class ModelMismatch(FacedynError):
 @dataclass
 class DynamicsModel:
     kind: str  # "removal" (network F), "synthesis" (network H) or "response" (an actor's linear response)
-    network: Network
+    network: Network | NetworkWeights  # a torch Network (trained or built here), or the weights a file holds (`torch_network`)
     face: FaceSetup
     fps: float
     windows: dict  # {"skull": w_b, "skin": w_x, "target": w}
@@ -128,6 +130,17 @@ class DynamicsModel:
     def spec(self) -> NetworkSpec:
         """The network's shape (what feature_sizes and frame_bytes read, of a loaded model or a checked file)."""
         return self.network.spec
+
+    @property
+    def weights(self) -> NetworkWeights:
+        """The network's weights as NumPy arrays, what applying the model on the CPU runs (no torch imported for a loaded model)."""
+        return NetworkWeights.of(self.network)
+
+    def torch_network(self) -> Network:
+        """The network as a torch module, built once from a loaded model's weights (without a copy): for training or a GPU."""
+        if isinstance(self.network, NetworkWeights):
+            self.network = self.network.to_torch()
+        return self.network
 
     @property
     def fingerprint(self) -> str:
@@ -202,7 +215,7 @@ def save_blend(models: list, path, weights=None) -> Path:
 
 def _contents(model: DynamicsModel) -> tuple[dict, dict[str, np.ndarray]]:
     """(metadata, arrays) of one model as its file stores them."""
-    arrays = {f"network/{k}": v.detach().cpu().numpy() for k, v in model.network.state_dict().items()}
+    arrays = {f"network/{k}": v for k, v in model.weights.state.items()}
     face = model.face
     arrays.update({
         "face/rest_points": face.rest_points.astype(np.float64),
@@ -486,13 +499,13 @@ class _Checked:
 
 
 def _build(path: Path, stored: _Stored) -> DynamicsModel:
-    """The model a checked file describes, its network holding the stored weights."""
+    """The model a checked file describes, its network the stored weights (torch is not imported)."""
     checked = _check(path, stored)
+    state = {name[len("network/"):]: value for name, value in stored.arrays.items() if name.startswith("network/")}
     try:
-        network = _network(checked.spec, stored.arrays)
-    except (RuntimeError, ValueError) as exc:
+        network = NetworkWeights(checked.spec, state)
+    except ValueError as exc:
         raise ModelFileError(f"{path} is an incomplete or inconsistent model: {type(exc).__name__}: {str(exc)[:200]}") from None
-    network.eval()
     return DynamicsModel(kind=checked.kind, network=network, face=checked.face, fps=checked.fps, windows=checked.windows,
                          info=checked.info, arrays=checked.arrays, skull_motion=checked.skull_motion, warnings=checked.warnings)
 
@@ -544,21 +557,6 @@ def _check(path: Path, stored: _Stored) -> _Checked:
     if stored.checksums is None:
         model.warnings.append(f"{path} is model format version {metadata['version']}, written without checksums, so damage to it cannot be detected; re-save it (load and save it with this facedyn) to add them")
     return model
-
-
-def _network(spec: NetworkSpec, arrays: dict[str, np.ndarray]) -> Network:
-    """The network of the stored weights, which it takes over without a copy: built on the
-    meta device (nothing allocated, no random initialization), then given the arrays."""
-    import torch
-
-    from facedyn.dynamics.network import Network
-
-    with torch.device("meta"):
-        network = Network(spec)
-    state = {name[len("network/"):]: torch.from_numpy(np.asarray(value, np.float32))
-             for name, value in arrays.items() if name.startswith("network/")}
-    network.load_state_dict(state, assign=True)
-    return network
 
 
 def _check_skull_motion(path: Path, value) -> None:

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import torch
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 
@@ -55,18 +54,16 @@ class Propagator:
     def apply_into(self, offsets: np.ndarray, out: np.ndarray) -> None:
         """Write P d for (F, S, 3) float32 offsets into a preallocated (F, N, 3) float32 array.
 
-        Frames go through in chunks: one (N, S) x (S, chunk * 3) product each (torch's
-        BLAS), whose result is small enough to be reordered to (chunk, N, 3) in cache.
+        Frames go through in chunks: one (N, S) x (S, chunk * 3) product each (BLAS),
+        whose result is small enough to be reordered to (chunk, N, 3) in cache.
         """
         n, s = self.matrix.shape
-        p = torch.from_numpy(self.matrix)
-        d = torch.from_numpy(np.ascontiguousarray(offsets, dtype=np.float32))
-        o = torch.from_numpy(out)
+        d = np.asarray(offsets, dtype=np.float32)
         for a in range(0, len(d), _APPLY_CHUNK):
             chunk = d[a: a + _APPLY_CHUNK]
             f = len(chunk)
-            product = p @ chunk.permute(1, 0, 2).reshape(s, f * 3)
-            o[a: a + f].copy_(product.view(n, f, 3).permute(1, 0, 2))
+            product = self.matrix @ chunk.transpose(1, 0, 2).reshape(s, f * 3)
+            out[a: a + f] = product.reshape(n, f, 3).transpose(1, 0, 2)
 
     def residual(self, offsets, backend: str = "auto") -> np.ndarray:
         """(F,) sqrt(sum_i |(L u)_i|^2 / m_i) of (F, N, 3) offsets: the energy minimized."""

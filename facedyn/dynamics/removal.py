@@ -16,11 +16,10 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-import torch
 
 from facedyn.dynamics.features import check_fps, compute_features
 from facedyn.dynamics.modelfile import DynamicsModel, affordable_frames
-from facedyn.dynamics.network import resolve_device
+from facedyn.dynamics.network_weights import network_runner
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.spikes import replace_spikes
 from facedyn.geometry import quaternion
@@ -64,7 +63,8 @@ def remove_dynamics(
     points: the captured skin, skull space (``space='skull'``, the stabilized layer's
     points) or world space (``'world'``); translate/orient: the skull T(t) (None =
     identity); fps: the take's rate, which must be the model's; backend: the features'
-    ``'auto' | 'opencl' | 'numpy'``; device: torch device for the network. The offsets are
+    ``'auto' | 'opencl' | 'numpy'``; device: where the network runs, ``'numpy'`` or a torch
+    device (``'auto'``: a CUDA GPU if there is one, else NumPy). The offsets are
     skull-frame vectors, zero on the rigid region; quasistatic = skull points - offsets.
     A person-independent model set up for the take (facedyn.dynamics.portable.for_take)
     reads the take in its face frame; its offsets come back in the take's skull frame.
@@ -88,8 +88,7 @@ def remove_dynamics(
     # skull-space copy above; F reads them with the tracker's spikes replaced.
     sample_points, _ = replace_spikes(skull_space(pts[:, model.face.samples], t, q, space))
     propagator = model.propagator()
-    network = model.network.to(resolve_device(device)).eval()
-    dev = next(network.parameters()).device
+    network = network_runner(model, device, split=True)
     window = model.windows["skull"]
     positions = model.arrays.get(SAMPLE_POSITIONS)
     if positions is not None and np.shape(positions) != (len(model.face.samples), 3):
@@ -99,14 +98,11 @@ def remove_dynamics(
     skull = None if model.skull_motion is None else model.skull_motion.features(t, q, model.face.landmarks, fps)
     offsets = np.empty((f, n, 3), np.float32)
     step = affordable_frames(model, int(chunk_frames))
-    with torch.inference_mode():
-        for a in range(0, f, step):
-            b = min(f, a + step)
-            feats = compute_features(sample_points, t, q, model.face.landmarks, fps, space="skull", window=window, frame_range=(a, b), backend=backend)
-            b_t = feats.skull if skull is None else skull[a:b]
-            skin = skin_inputs(feats.skin, positions)
-            d = network.forward_split(torch.from_numpy(b_t).to(dev), torch.from_numpy(np.ascontiguousarray(skin)).to(dev))
-            propagator.apply_into(d.cpu().numpy(), offsets[a:b])
+    for a in range(0, f, step):
+        b = min(f, a + step)
+        feats = compute_features(sample_points, t, q, model.face.landmarks, fps, space="skull", window=window, frame_range=(a, b), backend=backend)
+        b_t = feats.skull if skull is None else skull[a:b]
+        propagator.apply_into(network(b_t, skin_inputs(feats.skin, positions)), offsets[a:b])
     quasistatic = skull_points - offsets
     return quasistatic, offsets
 

@@ -62,7 +62,6 @@ import dataclasses
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
-import torch
 
 from facedyn.blas import single_threaded_blas
 from facedyn.dynamics.diagnostics import motion_left_beyond_sag
@@ -70,11 +69,12 @@ from facedyn.dynamics.expression_inertia import LOWPASS_HZ, expression_inertia, 
 from facedyn.dynamics.hardening import fit_hardening, hardening_load, stiffen
 from facedyn.dynamics.features import check_fps
 from facedyn.dynamics.modelfile import DynamicsModel
-from facedyn.dynamics.network import Network, NetworkSpec, resolve_device
+from facedyn.dynamics.netspec import NetworkSpec
+from facedyn.dynamics.network_weights import NetworkWeights
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.spikes import replace_spikes
-from facedyn.dynamics.training import TrainingSequence
+from facedyn.dynamics.training_sequence import TrainingSequence
 from facedyn.geometry import quaternion
 
 SETTLE_S = 0.4  # the simulated sessions ease their expression in over 0.3 s
@@ -134,7 +134,8 @@ def response_template(face, fps: float, info: dict | None = None) -> DynamicsMod
     accelerations over t-30..t+10, no stretch (a response reads none)."""
     motion = SkullMotionInput()
     spec = NetworkSpec(len(face.landmarks) * motion.width * 3, (), 3 * len(face.samples))
-    return DynamicsModel(kind="response", network=Network(spec), face=face, fps=float(fps), windows={}, info=dict(info or {}),
+    empty = _linear_network(spec, np.zeros((spec.inputs, spec.outputs)), np.ones(spec.inputs))
+    return DynamicsModel(kind="response", network=empty, face=face, fps=float(fps), windows={}, info=dict(info or {}),
                          skull_motion=motion)
 
 
@@ -377,7 +378,7 @@ def _removed_by_refit(take: TrainingSequence, model: DynamicsModel, fit: tuple) 
     record = model.info["calibration"]
     info = {**model.info, "calibration": {**record, "hardening": beta}} if "hardening" in record else model.info
     refitted = dataclasses.replace(model, network=_linear_network(model.network.spec, weights, scale), info=info)
-    return remove_with_response(take.points, take.translate, take.orient, take.fps, refitted, space=take.space, device="cpu")
+    return remove_with_response(take.points, take.translate, take.orient, take.fps, refitted, space=take.space)
 
 
 def is_linear_response(model: DynamicsModel) -> bool:
@@ -386,8 +387,8 @@ def is_linear_response(model: DynamicsModel) -> bool:
     return model.kind == "response"
 
 
-def remove_with_response(points, translate, orient, fps: float, model: DynamicsModel, *, space: str = "skull",
-                         device: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+def remove_with_response(points, translate, orient, fps: float, model: DynamicsModel, *,
+                         space: str = "skull") -> tuple[np.ndarray, np.ndarray]:
     """(quasistatic skull-space points, offsets), float32: the capture minus the dynamics the
     linear response predicts from the skull; arguments as facedyn.dynamics.removal.remove_dynamics."""
     if not is_linear_response(model):
@@ -400,14 +401,14 @@ def remove_with_response(points, translate, orient, fps: float, model: DynamicsM
     t, q = check_transforms(translate, orient, len(pts))
     b = model.skull_input.features(t, q, model.face.landmarks, fps)
     skull_points = skull_space(pts, t, q, space)
-    d = _dynamics(model, b, skull_points[:, model.face.samples], fps, device, skin_holds_dynamics=True)
+    d = _dynamics(model, b, skull_points[:, model.face.samples], fps, skin_holds_dynamics=True)
     offsets = np.empty((len(pts), pts.shape[1], 3), np.float32)
     model.propagator().apply_into(np.ascontiguousarray(d, dtype=np.float32), offsets)
     return skull_points.astype(np.float32) - offsets, offsets
 
 
-def synthesized_dynamics(model: DynamicsModel, skull_features: np.ndarray, quasistatic_samples: np.ndarray, fps: float,
-                         device: str = "cpu") -> np.ndarray:
+def synthesized_dynamics(model: DynamicsModel, skull_features: np.ndarray, quasistatic_samples: np.ndarray,
+                         fps: float) -> np.ndarray:
     """(frames, S, 3) float32: what a linear response synthesizes for a quasistatic skin under
     a skull motion: the skull-driven dynamics plus its answer to the skin's own acceleration
     below the recorded cut-off (the expression's inertia, as removal answers it), so that what
@@ -415,10 +416,10 @@ def synthesized_dynamics(model: DynamicsModel, skull_features: np.ndarray, quasi
     (frames, S, 3) the skin at the model's samples in skull space, spikes replaced as removal
     reads the capture (a quasistatic layer keeps the capture's pops). Files fitted before the
     term synthesize from the skull alone, as they did."""
-    return _dynamics(model, skull_features, quasistatic_samples, fps, device, skin_holds_dynamics=False)
+    return _dynamics(model, skull_features, quasistatic_samples, fps, skin_holds_dynamics=False)
 
 
-def _dynamics(model: DynamicsModel, skull_features: np.ndarray, skin: np.ndarray, fps: float, device: str, *,
+def _dynamics(model: DynamicsModel, skull_features: np.ndarray, skin: np.ndarray, fps: float, *,
               skin_holds_dynamics: bool) -> np.ndarray:
     """(frames, S, 3) float32: the skull-driven dynamics plus the answer to the skin's own
     acceleration below the recorded cut-off (files fitted before the term: the skull alone).
@@ -427,7 +428,7 @@ def _dynamics(model: DynamicsModel, skull_features: np.ndarray, skin: np.ndarray
     quasistatic skin (synthesis)."""
     lowpass = model.info["calibration"].get("expression_inertia_hz")
     kernel = _kernel(model) if lowpass is not None or _hardening(model) else None
-    d = _skull_driven(model, skull_features, device, kernel)
+    d = _skull_driven(model, skull_features, kernel)
     if lowpass is None:
         return d
     load, _ = replace_spikes(skin)
@@ -436,12 +437,12 @@ def _dynamics(model: DynamicsModel, skull_features: np.ndarray, skin: np.ndarray
     return d + expression_inertia(kernel, load, fps, model.skull_input.future, lowpass).astype(np.float32)
 
 
-def _skull_driven(model: DynamicsModel, skull_features: np.ndarray, device: str, kernel: np.ndarray | None) -> np.ndarray:
+def _skull_driven(model: DynamicsModel, skull_features: np.ndarray, kernel: np.ndarray | None) -> np.ndarray:
     """(frames, S, 3) float32: the samples' offsets the response predicts from a take's skull
     features (every frame of it, in order: its stiffening reads neighbouring frames), with its
     impulse kernel given (None: the model has no stiffening). Files fitted before the
     stiffening carry no `hardening` and answer linearly, as they did."""
-    d = _respond(model, skull_features, device).reshape(len(skull_features), -1, 3)
+    d = _respond(model, skull_features).reshape(len(skull_features), -1, 3)
     beta = _hardening(model)
     return d if not beta else stiffen(kernel, d, model.skull_input.future, beta).astype(np.float32)
 
@@ -460,13 +461,12 @@ def _kernel(model: DynamicsModel) -> np.ndarray:
     return translation_kernel(_raw_weights(model), len(model.face.landmarks), model.skull_input.past, model.skull_input.future)
 
 
-def _respond(model: DynamicsModel, skull_features: np.ndarray, device: str = "cpu") -> np.ndarray:
-    """(rows, 3S) float32: the response's samples' offsets for rows of skull features."""
+def _respond(model: DynamicsModel, skull_features: np.ndarray) -> np.ndarray:
+    """(rows, 3S) float32: the response's samples' offsets for rows of skull features (one
+    linear layer, applied in NumPy: a GPU would buy nothing)."""
     inputs = np.zeros((len(skull_features), model.network.spec.inputs), np.float32)  # the stretch it does not read stays zero
     inputs[:, : skull_features.shape[1]] = skull_features
-    network = model.network.to(resolve_device(device)).eval()
-    with torch.inference_mode():
-        return network(torch.from_numpy(inputs).to(next(network.parameters()).device)).cpu().numpy()
+    return model.weights.forward(inputs)
 
 
 def _raw_weights(model: DynamicsModel) -> np.ndarray:
@@ -495,17 +495,13 @@ def _take_rows(take: TrainingSequence, model: DynamicsModel, settle_s: float) ->
     return _TakeRows(b, keep, r - r.mean(0), x - x.mean(0))
 
 
-def _linear_network(template: NetworkSpec, weights: np.ndarray, scale: np.ndarray) -> Network:
+def _linear_network(template: NetworkSpec, weights: np.ndarray, scale: np.ndarray) -> NetworkWeights:
     """One linear layer over the template's inputs (skull features, then stretch, which it
     does not read) with inputs scaled but not centred: zero skull motion, zero dynamics."""
     skull_count, outputs = weights.shape
-    network = Network(NetworkSpec(template.inputs, (), outputs))
+    layer = np.zeros((outputs, template.inputs), np.float32)
+    layer[:, :skull_count] = weights.T
     std = np.ones(template.inputs)
     std[:skull_count] = scale
-    network.set_normalization(np.zeros(template.inputs), std, np.zeros(outputs), 1.0)
-    layer = network.layers[0]
-    with torch.no_grad():
-        layer.weight.zero_()
-        layer.weight[:, :skull_count] = torch.from_numpy(weights.T.astype(np.float32))
-        layer.bias.zero_()
-    return network
+    return NetworkWeights.normalized(NetworkSpec(template.inputs, (), outputs), [(layer, np.zeros(outputs))],
+                                     np.zeros(template.inputs), std, np.zeros(outputs), 1.0)

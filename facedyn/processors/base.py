@@ -224,6 +224,11 @@ def single_input(request: Request, what: str = "TAKE") -> Path:
     return Path(request.inputs[0])
 
 
+def check_inference_device(text: str) -> str | None:
+    """Where a model's network runs: numpy (on the CPU, no torch) or a torch device (check_device)."""
+    return None if text == "numpy" else check_device(text)
+
+
 def check_device(text: str) -> str | None:
     """torch device names: auto, cpu, cuda or cuda:N, a CUDA one only where this torch has that GPU."""
     if text in ("auto", "cpu"):

@@ -248,7 +248,7 @@ def fit_response(roots: list, family: Path, output: Path, params: dict, progress
     """Stage 3: the actor's linear response on the session, with F's samples and landmarks."""
     from facedyn.dynamics.modelfile import load_model, save_model
     from facedyn.dynamics.response import RIDGES, fit_linear_response, response_template
-    from facedyn.dynamics.training import TrainingSequence
+    from facedyn.dynamics.training_sequence import TrainingSequence
     from facedyn.processors.training_inputs import check_session_lengths, load_takes
 
     takes = load_takes(roots, {"include": "", "exclude": "", "validation": "", "skull": "take"}, progress)
@@ -274,7 +274,7 @@ def score_candidates(roots: list, family: Path, response: Path, params: dict, pr
 
     from facedyn.dynamics.modelfile import load_model
     from facedyn.dynamics.response import remove_left_out
-    from facedyn.dynamics.training import TrainingSequence
+    from facedyn.dynamics.training_sequence import TrainingSequence
     from facedyn.performance import QUASISTATIC
     from facedyn.processors.model_steps import removal_of, session_motion_left
     from facedyn.processors.training_inputs import take_name

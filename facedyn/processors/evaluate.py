@@ -169,7 +169,7 @@ def removed_by(read: list, models: list, weights) -> list:
 def _removals(read: list, model) -> list:
     """[(quasistatic, offsets)] of each take removed by one model."""
     from facedyn.dynamics.response import calibration_names, is_linear_response, remove_left_out
-    from facedyn.dynamics.training import TrainingSequence
+    from facedyn.dynamics.training_sequence import TrainingSequence
     from facedyn.processors.training_inputs import take_name
 
     names = [take_name(path) for path, _ in read]

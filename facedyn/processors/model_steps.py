@@ -103,7 +103,7 @@ def removal_of(points, translate, orient, fps: float, model, backend: str = "aut
 
     if model.kind == "removal":
         return remove_dynamics(points, translate, orient, fps, model, backend=backend, device=device)
-    return remove_with_response(points, translate, orient, fps, model, device=device)
+    return remove_with_response(points, translate, orient, fps, model)
 
 
 def session_motion_left(takes, names: tuple[str, ...], skip_s: float, band_pair: tuple[str, str] | None = None) -> dict:

@@ -10,7 +10,7 @@ accelerations by default, the paper's velocities with `--skull-features velocity
 `--calibrate MODEL` goes on training an existing H (one trained on a simulated corpus of
 many tissues) on one actor's own captures instead, through F as the paper does: the actor's
 tissue answers the skull in its own way, which a family's average does not
-(facedyn.dynamics.synthesis.calibrate_synthesis). `--calibrate MODEL --response linear`
+(facedyn.dynamics.synthesis_training.calibrate_synthesis). `--calibrate MODEL --response linear`
 fits the actor's linear response to the skull by least squares instead, on takes that each
 hold one expression, with neither F nor truth (facedyn.dynamics.response says how); it
 keeps the model's setup (an H's, or another response's) and writes a model of kind
@@ -95,8 +95,8 @@ class TrainSynthesisProcessor(Processor):
         from facedyn.dynamics.modelfile import save_model
         from facedyn.dynamics.response import RIDGES, fit_linear_response
         from facedyn.dynamics.skull_motion import NAMED
-        from facedyn.dynamics.synthesis import calibrate_synthesis, synthesis_config, train_synthesis
-        from facedyn.dynamics.training import TrainingSequence
+        from facedyn.dynamics.synthesis_training import calibrate_synthesis, synthesis_config, train_synthesis
+        from facedyn.dynamics.training_sequence import TrainingSequence
 
         request, takes, quasistatic, face, frame, calibrated = plan.state
         params = request.params
@@ -146,7 +146,7 @@ def check_sources(params: dict) -> None:
 
 def epochs_of(params: dict, calibrated) -> int:
     """--epochs, else the paper's 30 for a new H and CALIBRATION_EPOCHS for a calibration."""
-    from facedyn.dynamics.synthesis import CALIBRATION_EPOCHS, EPOCHS
+    from facedyn.dynamics.synthesis_training import CALIBRATION_EPOCHS, EPOCHS
 
     return params["epochs"] or (EPOCHS if calibrated is None else CALIBRATION_EPOCHS)
 

@@ -80,7 +80,7 @@ def training_sequences(named: list[tuple[str, Path]], skull: str, truth: bool):
     dynamics from the corpus when `truth`): a trainer holds one take's frames at a time."""
     from dataclasses import replace
 
-    from facedyn.dynamics.training import TrainingSequence
+    from facedyn.dynamics.training_sequence import TrainingSequence
     from facedyn.usd.corpus_files import read_truth
     from facedyn.usd.training_data import read_training_take
 

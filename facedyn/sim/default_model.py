@@ -75,7 +75,7 @@ def face_takes(rig: FaceRig, seed: int, data_dir: Path | None, volumetric_every:
 
 def corpus_takes(faces, args, record: dict):
     """Every face's simulated takes in its face frame, as TrainingSequences, one at a time."""
-    from facedyn.dynamics.training import TrainingSequence
+    from facedyn.dynamics.training_sequence import TrainingSequence
 
     for k, (rig, description) in enumerate(faces):
         setup, frame = face_setup(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices, uvs=rig.uvs)

@@ -22,8 +22,9 @@ from facedyn.batch.plan import Models, plan_batch  # noqa: E402
 from facedyn.batch.state import STATE_FILE, file_checksum  # noqa: E402
 from facedyn.dynamics.face import FaceSetup  # noqa: E402
 from facedyn.dynamics.modelfile import load_model, save_model  # noqa: E402
-from facedyn.dynamics.synthesis import synthesis_config, train_synthesis  # noqa: E402
-from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal  # noqa: E402
+from facedyn.dynamics.synthesis_training import synthesis_config, train_synthesis  # noqa: E402
+from facedyn.dynamics.training import TrainConfig, train_removal  # noqa: E402
+from facedyn.dynamics.training_sequence import TrainingSequence  # noqa: E402
 from facedyn.sim.corpus import TakeSpec, simulate_take  # noqa: E402
 from facedyn.sim.default_face import default_face  # noqa: E402
 from facedyn.usd.corpus_files import write_simulated_take  # noqa: E402

@@ -10,7 +10,8 @@ from facedyn.dynamics.network import Network, removal_spec
 from facedyn.dynamics.removal import remove_dynamics
 from facedyn.dynamics.skull import to_world
 from facedyn.dynamics.skull_motion import SkullMotionInput
-from facedyn.dynamics.training import TrainingSequence, TrainConfig, train_removal
+from facedyn.dynamics.training import TrainConfig, train_removal
+from facedyn.dynamics.training_sequence import TrainingSequence
 
 ROWS, COLS, FPS = 12, 10, 120.0
 

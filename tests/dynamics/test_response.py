@@ -1,14 +1,14 @@
 """An actor's linear response fitted on held expressions without truth (facedyn.dynamics.response)."""
 import numpy as np
 import pytest
-import torch
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import DynamicsModel, load_model, save_model
 from facedyn.dynamics.network import Network, removal_spec
 from facedyn.dynamics.response import RIDGE, RIDGES, fit_linear_response
-from facedyn.dynamics.synthesis import synthesis_config, synthesize_dynamics, train_synthesis
-from facedyn.dynamics.training import TrainingSequence
+from facedyn.dynamics.synthesis import synthesize_dynamics
+from facedyn.dynamics.synthesis_training import synthesis_config, train_synthesis
+from facedyn.dynamics.training_sequence import TrainingSequence
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face
 from facedyn.sim.tissue import TissueParams
@@ -337,8 +337,8 @@ def test_a_blend_holds_its_members_whole_in_one_checked_file(template, response,
     members, weights = load_models(path, topology=response.fingerprint, fps=FPS)
     assert [m.kind for m in members] == ["response", "response"] and weights.is_mean()
     for member in members:
-        for ours, theirs in zip(member.network.state_dict().values(), response.network.state_dict().values()):
-            assert torch.equal(ours, theirs)
+        for ours, theirs in zip(member.weights.state.values(), response.weights.state.values()):
+            assert np.array_equal(ours, theirs)
         assert member.info["calibration"] == response.info["calibration"]
     assert [m.kind for m in load_models(save_model(response, tmp_path / "one.response"))[0]] == ["response"]
     bands = BandWeights((2.0, 4.0), np.array([[0.25, 0.75], [0.5, 0.5], [1.0, 0.0]]))

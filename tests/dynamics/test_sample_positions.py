@@ -8,7 +8,8 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import load_model, save_model
 from facedyn.dynamics.removal import SAMPLE_POSITIONS, remove_dynamics, sample_positions, skin_inputs
 from facedyn.dynamics.skull_motion import SkullMotionInput
-from facedyn.dynamics.training import TrainConfig, TrainingSequence, train_removal
+from facedyn.dynamics.training import TrainConfig, train_removal
+from facedyn.dynamics.training_sequence import TrainingSequence
 
 ROWS, COLS, FPS = 12, 10, 120.0
 NOISE_CM = 0.02  # tracking noise: its velocity (about 3 cm/s) swamps the slow offsets' (about 0.6 cm/s)

@@ -13,7 +13,8 @@ from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.features import compute_features
 from facedyn.dynamics.skull import to_world
 from facedyn.dynamics.store import BLOCK_FRAMES, WINDOW_INDEX, Moments, StreamedExamples, TrainingStore, moments_of
-from facedyn.dynamics.training import PairSet, TrainingSequence, TrainConfig, train_removal
+from facedyn.dynamics.training import PairSet, TrainConfig, train_removal
+from facedyn.dynamics.training_sequence import TrainingSequence
 
 FPS = 120.0
 

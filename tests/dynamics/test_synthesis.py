@@ -13,8 +13,9 @@ from facedyn.dynamics.root_motion import align_trajectory, delta_transfer, skull
 from facedyn.dynamics.skull import to_world
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods
-from facedyn.dynamics.synthesis import calibrate_synthesis, model_stretch, synthesis_config, synthesize_dynamics, train_synthesis
-from facedyn.dynamics.training import TrainingSequence
+from facedyn.dynamics.synthesis import model_stretch, synthesize_dynamics
+from facedyn.dynamics.synthesis_training import calibrate_synthesis, synthesis_config, train_synthesis
+from facedyn.dynamics.training_sequence import TrainingSequence
 from facedyn.geometry import quaternion
 from facedyn.sim.corpus import TakeSpec, simulate_take
 from facedyn.sim.default_face import default_face

@@ -182,7 +182,7 @@ def test_train_synthesis_calibrates_an_existing_h_on_an_actors_takes(corpus, cap
     assert set(calibrated.arrays) == set(family.arrays)
     assert [t["name"] for t in calibrated.info["calibration"]["takes"]] == ["smile_walk", "jaw_open_platform7"]
     assert calibrated.info["training"] == family.info["training"]
-    assert not all(torch.equal(a, b) for a, b in zip(calibrated.network.parameters(), family.network.parameters()))
+    assert not all(np.array_equal(a, family.weights.state[name]) for name, a in calibrated.weights.state.items())
     assert cli("train-synthesis", *takes, "-o", tmp_path / "bad.synthesis", "--calibrate", models / "f.removal",
                "--quasistatic", models / "f.removal", "--skull", "truth") != 0
     assert "--calibrate needs a synthesis model" in capsys.readouterr().err
@@ -218,8 +218,8 @@ def test_train_synthesis_fits_an_actors_linear_response_that_synthesizes_and_rem
     assert (tmp_path / "again.response").read_bytes() == (tmp_path / "given.response").read_bytes()  # same inputs, same bytes
     given = load_model(tmp_path / "given.response")
     assert given.info["calibration"]["ridge_candidates"] == {f"{chosen:g}": candidates[f"{chosen:g}"]}
-    for ours, theirs in zip(given.network.state_dict().values(), fitted.network.state_dict().values()):
-        assert torch.equal(ours, theirs)
+    for name, ours in given.weights.state.items():
+        assert np.array_equal(ours, fitted.weights.state[name])
     for name in ("given", "again"):
         (tmp_path / f"{name}.response").unlink()
     capsys.readouterr()

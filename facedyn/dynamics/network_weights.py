@@ -1,0 +1,163 @@
+"""A dynamics network's weights as NumPy arrays, and its forward pass: applying a model without torch.
+
+Importing torch costs a command more than a second on a workstation, more than the network
+itself takes on a thousand frames of a face. So a model read from a file keeps its network
+as these arrays (named as the torch module's state_dict), `remove`, `synthesize` and a
+linear response run the forward pass here on the CPU, and the torch module
+(facedyn.dynamics.network.Network) is built from them, taking the arrays over without a
+copy, only where something trains the network or runs it on a GPU.
+
+The forward pass is the torch module's, in float32: inputs standardized per feature, ReLU
+between the layers, outputs scaled back by one common scale and a per-coordinate mean.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+
+from facedyn.dynamics.netspec import NetworkSpec
+
+NUMPY = "numpy"  # the `device` that runs the network here, in NumPy
+_GPU_DRIVER_FILES = ("/dev/nvidiactl", "/proc/driver/nvidia")
+
+
+class NetworkWeights:
+    """An MLP's weights and normalization (float32 arrays) and its forward pass."""
+
+    def __init__(self, spec: NetworkSpec, state: dict[str, np.ndarray]):
+        expected = _state_shapes(spec)
+        missing, unknown = sorted(set(expected) - set(state)), sorted(set(state) - set(expected))
+        if missing or unknown:
+            raise ValueError(f"the {spec} network's weights are missing {missing} and hold unexpected {unknown}")
+        for name, shape in expected.items():
+            if np.shape(state[name]) != shape:
+                raise ValueError(f"the network's {name} is {np.shape(state[name])}, its architecture needs {shape}")
+        self.spec = spec
+        self.state = {name: np.asarray(state[name], dtype=np.float32) for name in expected}
+
+    @classmethod
+    def of(cls, network) -> "NetworkWeights":
+        """The weights of a network: these weights, or a torch Network's (sharing its CPU memory)."""
+        if isinstance(network, cls):
+            return network
+        return cls(network.spec, {name: value.detach().cpu().numpy() for name, value in network.state_dict().items()})
+
+    @classmethod
+    def normalized(cls, spec: NetworkSpec, layers: list[tuple[np.ndarray, np.ndarray]], input_mean, input_std, output_mean,
+                   output_scale: float) -> "NetworkWeights":
+        """Weights from (weight (out, in), bias) per layer and the statistics, as Network.set_normalization
+        keeps them: a zero spread becomes 1, so a constant input passes as 0."""
+        std = np.asarray(input_std, dtype=np.float64)
+        state = {f"layers.{2 * i}.weight": w for i, (w, _) in enumerate(layers)}
+        state.update({f"layers.{2 * i}.bias": b for i, (_, b) in enumerate(layers)})
+        state.update(input_mean=np.asarray(input_mean), input_std=np.where(std > 1e-12, std, 1.0),
+                     output_mean=np.asarray(output_mean), output_scale=np.array([output_scale if output_scale > 1e-12 else 1.0]))
+        return cls(spec, state)
+
+    def layers(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(weight (out, in), bias (out,)) of each linear layer, first to last."""
+        count = len(self.spec.hidden) + 1
+        return [(self.state[f"layers.{2 * i}.weight"], self.state[f"layers.{2 * i}.bias"]) for i in range(count)]
+
+    def forward(self, inputs: np.ndarray) -> np.ndarray:
+        """(rows, outputs) float32 for (rows, inputs) raw features."""
+        x = np.asarray(inputs, dtype=np.float32)
+        if x.ndim != 2 or x.shape[1] != self.spec.inputs:
+            raise ValueError(f"the network takes (rows, {self.spec.inputs}) inputs, got {x.shape}")
+        (weight, bias), *rest = self.layers()
+        scaled = weight / self.state["input_std"]
+        h = x @ scaled.T
+        h += bias - scaled @ self.state["input_mean"]
+        return self._rest(h, rest)
+
+    def forward_split(self, shared: np.ndarray, items: np.ndarray) -> np.ndarray:
+        """(F, I, outputs) float32: forward(concat(shared[f], items[f, i])) for all f, i, without the concatenation.
+
+        shared: (F, Ds) inputs common to every item of a frame (F's skull features B(t));
+        items: (F, I, Di) per-item inputs. The first layer's shared part is computed once
+        per frame, with the normalization folded into the weights (Network.forward_split).
+        """
+        shared = np.asarray(shared, dtype=np.float32)
+        items = np.asarray(items, dtype=np.float32)
+        ds = shared.shape[-1]
+        if ds + items.shape[-1] != self.spec.inputs:
+            raise ValueError(f"inputs of sizes {ds} + {items.shape[-1]} do not add up to the network's {self.spec.inputs}")
+        (weight, bias), *rest = self.layers()
+        scaled = weight / self.state["input_std"]
+        per_frame = shared @ scaled[:, :ds].T
+        per_frame += bias - scaled @ self.state["input_mean"]
+        frames, count = items.shape[:2]
+        h = items.reshape(frames * count, -1) @ scaled[:, ds:].T
+        h.reshape(frames, count, -1)[:] += per_frame[:, None, :]
+        return self._rest(h, rest).reshape(frames, count, -1)
+
+    def _rest(self, h: np.ndarray, rest: list) -> np.ndarray:
+        """The layers after the first (ReLU before each) and the output scaling, in place where it can."""
+        for weight, bias in rest:
+            np.maximum(h, 0.0, out=h)
+            h = h @ weight.T
+            h += bias
+        h *= self.state["output_scale"]
+        h += self.state["output_mean"]
+        return h
+
+    def to_torch(self):
+        """The torch Network holding these arrays (no copy, no random initialization): what training and GPUs use."""
+        import torch
+
+        from facedyn.dynamics.network import Network
+
+        with torch.device("meta"):
+            network = Network(self.spec)
+        network.load_state_dict({name: torch.from_numpy(value) for name, value in self.state.items()}, assign=True)
+        return network.eval()
+
+
+def _state_shapes(spec: NetworkSpec) -> dict[str, tuple[int, ...]]:
+    """The arrays a network of this shape holds, by name, and their shapes, in the torch module's
+    state_dict order (its own statistics, then the layers): the order a model file stores them in."""
+    sizes = (spec.inputs, *spec.hidden, spec.outputs)
+    shapes: dict[str, tuple[int, ...]] = {"input_mean": (spec.inputs,), "input_std": (spec.inputs,), "output_mean": (spec.outputs,),
+                                          "output_scale": (1,)}
+    for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
+        shapes[f"layers.{2 * i}.weight"] = (b, a)
+        shapes[f"layers.{2 * i}.bias"] = (b,)
+    return shapes
+
+
+def inference_device(device: str) -> str:
+    """Where a model's network runs: ``numpy`` (here, without torch) or a torch device name.
+
+    'auto' is a CUDA GPU when this machine has one that torch can use, else NumPy; the
+    driver's files are looked at first, so a machine without a GPU never imports torch.
+    """
+    if device != "auto":
+        return device
+    if "torch" not in sys.modules and not any(os.path.exists(path) for path in _GPU_DRIVER_FILES):
+        return NUMPY
+    import torch
+
+    return "cuda" if torch.cuda.is_available() else NUMPY
+
+
+def network_runner(model, device: str, split: bool = False):
+    """A model's network as a function of NumPy arrays returning one: its forward pass, or
+    with `split` its forward_split (shared, items), run here in NumPy or by torch on `device`."""
+    where = inference_device(device)
+    if where == NUMPY:
+        weights = model.weights
+        return weights.forward_split if split else weights.forward
+    import torch
+
+    from facedyn.dynamics.network import resolve_device
+
+    network = model.torch_network().to(resolve_device(where)).eval()
+    dev = next(network.parameters()).device
+    method = network.forward_split if split else network.forward
+
+    def run(*arrays: np.ndarray) -> np.ndarray:
+        with torch.inference_mode():
+            return method(*(torch.from_numpy(np.ascontiguousarray(a)).to(dev) for a in arrays)).cpu().numpy()
+    return run
