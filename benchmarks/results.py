@@ -111,6 +111,7 @@ def testset_records(folder: Path) -> list[dict]:
             flags += " --no-actor" if run.get("stabilized") == "without --actor" else ""
             flags += f" --synthesis {run['synthesis']}" if run.get("synthesis") else ""
             flags += f" --transfer {run['transfer']}" if run.get("transfer") else ""
+            flags += f" --source-actor {run['source_actor']} --source-removal {run['source_removal']}" if run.get("source_actor") else ""
             records.append({
                 "benchmark": "testset", "id": f"testset-{path.stem}",
                 "case": f"{run['actor']} ({run['split']} actor), removal: {run.get('removal') or 'none'}, stabilized {run.get('stabilized', 'with --actor')}",

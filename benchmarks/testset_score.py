@@ -1,7 +1,7 @@
 """Score removals on a test-set actor's test takes (benchmarks/README-testset.md); one JSON file per run.
 
     .venv/bin/python benchmarks/testset_score.py ACTOR_FOLDER [--removal MODEL [--blend MODEL]] [--work DIR] [--results DIR] [--no-actor]
-        [--synthesis MODEL [--transfer FOLDER]] [--note "how MODEL was made"]
+        [--synthesis MODEL [--transfer FOLDER] [--source-actor FOLDER --source-removal MODEL]] [--note "how MODEL was made"]
 
 Per test take: `usdfacedyn actor rig.usda`, then `import` + `stabilize --actor` of
 tracked.usdc (the console as a user runs it), and the figures (fraction of the true
@@ -17,7 +17,12 @@ the issue's synthesis and retargeting cases: the expression take's quasistatic l
 the removal) `synthesize`d under the motion take's solved skull (`synthesis`), `retarget`ed
 from the motion take with the model (`retarget`) and by copying the motion take's removed
 offsets (`delta_transfer`), each against the transfer take's true dynamics; and
-`retarget_to_delta_transfer`, their ratio (issue 37: synthesis <= 0.3, the ratio <= 0.5). The run's figures, with commit, date and machine, go to RESULTS/<actor>-<UTC time>.json
+`retarget_to_delta_transfer`, their ratio (issue 37: synthesis <= 0.3, the ratio <= 0.5).
+A cross take (`--takes cross --source-actor A`: the walking dialog under actor A's run) is
+scored the same way across actors, the issue's retargeting case: A's run (in --source-actor
+FOLDER, A's actor folder) is stabilized with A's actor and removed with A's removal
+(--source-removal), and retargeting moves its root motion onto this actor (its own synthesis
+model), where delta transfer copies A's tissue's offsets. The run's figures, with commit, date and machine, go to RESULTS/<actor>-<UTC time>.json
 (default benchmarks/results/testset/) and to stdout, one JSON object per take.
 """
 from __future__ import annotations
@@ -57,7 +62,10 @@ def main() -> None:
     parser.add_argument("--work", type=Path, help="keep the imported takes here (default: a temporary folder)")
     parser.add_argument("--results", type=Path, default=REPO / "benchmarks" / "results" / "testset")
     parser.add_argument("--synthesis", type=Path, help="with --removal: the actor's synthesis model, scored on the transfer takes")
-    parser.add_argument("--transfer", type=Path, help="the actor folder holding its transfer takes (default: ACTOR_FOLDER)")
+    parser.add_argument("--transfer", type=Path, nargs="+", help="actor folders of this actor holding its transfer or cross takes "
+                        "(default: ACTOR_FOLDER)")
+    parser.add_argument("--source-actor", type=Path, help="with cross takes: the folder of the actor whose run they move like")
+    parser.add_argument("--source-removal", type=Path, help="with --source-actor: that actor's removal model (its offsets, for delta transfer)")
     parser.add_argument("--note", default="", help="how the removal model was made (the results page shows it beside the figures)")
     args = parser.parse_args()
     info_path = args.actor / "actor.json"
@@ -70,12 +78,16 @@ def main() -> None:
     if args.synthesis is not None and (args.removal is None or args.no_actor):
         sys.exit("--synthesis needs --removal (synthesis and retargeting start from the removal's quasistatic takes) and the actor's "
                  "frame (not --no-actor)")
-    transfers = read_transfer_recipes(args.transfer or args.actor, args.actor, tests) if args.synthesis is not None else []
+    transfers = ([(folder, recipe) for folder in args.transfer or [args.actor]
+                  for recipe in read_transfer_recipes(folder, args.actor, tests, args.source_actor)] if args.synthesis is not None else [])
+    if any(recipe["kind"] == "cross" for _, recipe in transfers) and args.source_removal is None:
+        sys.exit("cross takes need --source-removal, the source actor's removal model (delta transfer copies its offsets)")
     run = {"actor": info["actor"]["name"], "split": info["actor"]["split"], "commit": commit(),
            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "machine": platform.node(),
            "cpus": os.cpu_count(), "removal": args.removal and str(args.removal), "blend": args.blend and str(args.blend),
            "stabilized": "without --actor" if args.no_actor else "with --actor", "synthesis": args.synthesis and str(args.synthesis),
-           "transfer": args.transfer and str(args.transfer),
+           "transfer": args.transfer and " ".join(map(str, args.transfer)), "source_actor": args.source_actor and str(args.source_actor),
+           "source_removal": args.source_removal and str(args.source_removal),
            **({"note": args.note} if args.note else {}), "takes": []}
     with tempfile.TemporaryDirectory(prefix="facedyn-testset-") as scratch:
         work = args.work or Path(scratch)
@@ -103,8 +115,11 @@ def main() -> None:
                 case["removal"] = round(fraction_left(read_layers([layer, folder / "take.usda"]).offsets @ turn.T, truth), 4)
             print(json.dumps(case), flush=True)
             run["takes"].append(case)
-        for recipe in transfers:
-            case = score_transfer(recipe, args.transfer or args.actor, work, args.synthesis)
+        for folder, recipe in transfers:
+            expression_take, motion_take = recipe["sources"]
+            source = (work / motion_take / "take.usda" if recipe["kind"] == "transfer"
+                      else source_take(args.source_actor, motion_take.split("/")[1], work / "source", args.source_removal))
+            case = score_transfer(recipe, folder, work / expression_take / "take.usda", source, work, args.synthesis)
             print(json.dumps(case), flush=True)
             run.setdefault("transfers", []).append(case)
     dialogs = [c for c in run["takes"] if c["take"].startswith("dialog")]
@@ -128,34 +143,60 @@ def reload_layers(*paths: Path) -> None:
             layer.Reload(force=True)
 
 
-def read_transfer_recipes(folder: Path, actor: Path, tests: list[str]) -> list[dict]:
-    """The transfer takes' recipes in `folder` (an actor folder of the same actor as `actor`,
-    both of whose sources are `tests`); exits with the reason where there are none."""
+def read_transfer_recipes(folder: Path, actor: Path, tests: list[str], source_actor: Path | None) -> list[dict]:
+    """The transfer and cross takes' recipes in `folder` (an actor folder of the same actor as
+    `actor`; a transfer's sources are `tests`, a cross take's expression is one of `tests` and its
+    motion a test take of `source_actor`); exits with the reason where there are none."""
     info_path = folder / "actor.json"
     if not info_path.is_file():
         sys.exit(f"{folder}: not an actor folder (no actor.json)")
     if (folder / "rig.usda").read_bytes() != (actor / "rig.usda").read_bytes():
         sys.exit(f"{folder}: its rig.usda is not {actor}'s: the transfer takes must be the same actor's")
-    recipes = [t for t in json.loads(info_path.read_text())["takes"] if t["kind"] == "transfer"]
+    recipes = [t for t in json.loads(info_path.read_text())["takes"] if t["kind"] in ("transfer", "cross")]
     if not recipes:
-        sys.exit(f"{folder}: has no transfer takes (generate them with --takes transfer)")
+        sys.exit(f"{folder}: has no transfer takes (generate them with --takes transfer or cross)")
     for recipe in recipes:
-        missing = [name for name in recipe["sources"] if name not in tests]
+        expression_take, motion_take = recipe["sources"]
+        missing = [name for name in (expression_take, motion_take) if name not in tests and recipe["kind"] == "transfer"]
+        missing += [expression_take] if recipe["kind"] == "cross" and expression_take not in tests else []
         if missing:
             sys.exit(f"{folder}: transfer take {recipe['name']} needs the test takes {missing}, which {actor} lacks")
+        if recipe["kind"] == "cross":
+            name, take = motion_take.split("/")
+            if source_actor is None or not (source_actor / "actor.json").is_file():
+                sys.exit(f"{folder}: cross take {recipe['name']} moves like {motion_take}: give --source-actor, {name}'s actor folder")
+            if json.loads((source_actor / "actor.json").read_text())["actor"]["name"] != name or not (source_actor / "takes" / take).is_dir():
+                sys.exit(f"{source_actor}: is not the actor folder of {name} with its take {take}")
     return recipes
 
 
-def score_transfer(recipe: dict, folder: Path, work: Path, model: Path) -> dict:
+def source_take(source_actor: Path, take: str, work: Path, removal: Path) -> Path:
+    """A cross take's motion take, as the source actor's own pipeline leaves it: imported,
+    stabilized with its actor, its dynamics removed with its removal (attached to its root)."""
+    folder = work / take
+    actor = work / "actor.usda"
+    if not actor.is_file():
+        work.mkdir(parents=True, exist_ok=True)
+        usdfacedyn("actor", str(source_actor / "rig.usda"), "-o", str(actor))
+    if not (folder / "take.usda").is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        stabilize_with_cli(source_actor / "takes" / take / "tracked.usdc", folder, actor)
+    usdfacedyn("remove", str(folder / "take.usda"), "-o", str(folder / "quasistatic.usdc"), "--attach", str(folder / "take.usda"),
+               "--model", str(removal))
+    reload_layers(folder / "quasistatic.usdc", folder / "take.usda")
+    return folder / "take.usda"
+
+
+def score_transfer(recipe: dict, folder: Path, target: Path, source: Path, work: Path, model: Path) -> dict:
     """One transfer take's synthesis, retargeting and delta transfer (the module's docstring);
-    the sources' take roots in `work` hold their quasistatic layers (the removal)."""
+    target, source: the expression's and the motion's take roots, holding their quasistatic
+    layers (the removal); the layers made go to `work`/<take>."""
     from facedyn.evaluation import residual_fraction
     from facedyn.usd.take import read_layers
     from testset.score import dynamics_rms_mm, fraction_left, load_truth, static_share
 
     expression_take, motion_take = recipe["sources"]
     truth = load_truth(folder, recipe["name"])
-    target, source = work / expression_take / "take.usda", work / motion_take / "take.usda"
     out = work / recipe["name"]
     out.mkdir(exist_ok=True)
     commands = {"synthesis": ("synthesize", str(target), "--model", str(model), "--skull-motion", str(source)),

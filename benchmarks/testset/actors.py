@@ -77,6 +77,18 @@ def transfer_takes(seed: int, seconds: float = 2.5) -> list[TakeRecipe]:
                        motion_seed=run.seed, sources=(walk.name, run.name))]
 
 
+def cross_actor_takes(seed: int, source: ActorSpec, seconds: float = 2.5) -> list[TakeRecipe]:
+    """The walking dialog's performance under another actor's run (that actor's test take's
+    skull trajectory, frame for frame): what retargeting that actor's root motion onto this one
+    should give. The issue's retargeting case: the other actor's tissue is not this one's, so
+    copying its removed offsets (delta transfer) copies the wrong tissue's answer, where
+    synthesis makes this actor's own. `source` must share this actor's face (one topology)."""
+    walk, _, _ = test_takes(seed, seconds)
+    _, run, _ = test_takes(source.take_seed, seconds)
+    return [TakeRecipe(f"walk_dialog_under_{source.name}_run", "cross", run.motion, dialog=walk.dialog, duration_s=seconds, seed=walk.seed,
+                       motion_seed=run.seed, sources=(walk.name, f"{source.name}/{run.name}"))]
+
+
 def _label(motion: str) -> str:
     kind, _, arg = motion.partition(":")
     if kind == "platform":

@@ -38,7 +38,7 @@ import numpy as np
 from facedyn.geometry import quaternion
 from facedyn.sim.noise import TrackerNoise, add_tracker_noise
 from facedyn.rig import FaceRig
-from testset.actors import FPS, SUBSTEPS, ActorSpec, session_takes, test_takes, transfer_takes
+from testset.actors import FPS, SUBSTEPS, ActorSpec, cross_actor_takes, session_takes, test_takes, transfer_takes
 from testset.takes import LEAD_S, TakeRecipe, expression_weights, skull_trajectory
 from testset.tissue import Drive, MujocoTissue, TissueParams
 
@@ -130,9 +130,10 @@ def actor_rig(spec: ActorSpec, data: Path) -> FaceRig:
 
 
 def generate_actor(spec: ActorSpec, out: Path, data: Path, which: tuple[str, ...] = ("session", "test"), seconds_scale: float = 1.0,
-                   jobs: int = 1, progress=print) -> Path:
+                   jobs: int = 1, progress=print, source: ActorSpec | None = None) -> Path:
     """Write the actor folder `out` (atomically: a temporary folder renamed into place); `jobs`
-    takes at a time in worker processes (each simulation is one sequential loop on one core)."""
+    takes at a time in worker processes (each simulation is one sequential loop on one core).
+    "cross" in `which` needs `source`, the actor whose run the cross take moves like."""
     from facedyn.usd.blendshape_rig import write_blendshape_rig
 
     if out.exists():
@@ -145,6 +146,10 @@ def generate_actor(spec: ActorSpec, out: Path, data: Path, which: tuple[str, ...
         recipes += test_takes(spec.take_seed, 2.5 * seconds_scale)
     if "transfer" in which:
         recipes += transfer_takes(spec.take_seed, 2.5 * seconds_scale)
+    if "cross" in which:
+        if source is None or source.face != spec.face or source.name == spec.name:
+            raise ValueError(f"cross takes need another actor of the {spec.face} face as their source, got {source and source.name}")
+        recipes += cross_actor_takes(spec.take_seed, source, 2.5 * seconds_scale)
     out.parent.mkdir(parents=True, exist_ok=True)
     scratch = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:

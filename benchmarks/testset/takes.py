@@ -37,9 +37,10 @@ HELD = {
 
 @dataclass(frozen=True)
 class TakeRecipe:
-    """One take: `kind` is "session" (held expressions, for calibration), "test", or "transfer"
+    """One take: `kind` is "session" (held expressions, for calibration), "test", "transfer"
     (one test take's expression under another's skull motion: the truth that synthesis and
-    retargeting are scored against; `sources` names the two, expression first)."""
+    retargeting are scored against; `sources` names the two, expression first) or "cross"
+    (a transfer whose motion is another actor's test take: its source named ACTOR/TAKE)."""
 
     name: str
     kind: str
@@ -49,7 +50,7 @@ class TakeRecipe:
     duration_s: float = 3.0
     seed: int = 0
     motion_seed: int | None = None  # the skull trajectory's seed (None: `seed`)
-    sources: tuple[str, ...] = ()  # a transfer take's (expression take, motion take)
+    sources: tuple[str, ...] = ()  # a transfer take's (expression take, motion take); a cross take's motion take is ACTOR/TAKE
 
     @property
     def skull_seed(self) -> int:
