@@ -184,3 +184,27 @@ def test_the_session_is_held_apart_from_the_test_takes_and_a_transfer_take_is_th
     names = ("jawOpen", "mouthFunnel", "mouthSmile_L")
     np.testing.assert_array_equal(expression_weights(transfer, names, data, 60.0, 90), expression_weights(walk, names, data, 60.0, 90))
     assert not np.array_equal(expression_weights(transfer, names, data, 60.0, 90), expression_weights(run, names, data, 60.0, 90))
+
+
+def test_a_cross_take_plays_this_actors_walk_under_another_actors_run():
+    """The issue's retargeting case: the walking dialog's expression (this actor's seed) under
+    exactly the source actor's run skull (its seed); only an actor of the same face can be a source."""
+    from testset.actors import ACTORS, cross_actor_takes, test_takes
+    from testset.generate import generate_actor
+    from testset.takes import expression_weights, skull_trajectory
+
+    target, source = ACTORS["test_default_3103"], ACTORS["val_default_2101"]
+    (cross,) = cross_actor_takes(target.take_seed, source)
+    walk, _, _ = test_takes(target.take_seed)
+    _, their_run, _ = test_takes(source.take_seed)
+    assert cross.kind == "cross" and cross.sources == ("dialog_walk", "val_default_2101/dialog_run")
+    assert (cross.seed, cross.skull_seed, cross.motion) == (walk.seed, their_run.seed, their_run.motion)
+    with pytest.raises(ValueError, match="another actor of the default face"):
+        generate_actor(target, Path("/nonexistent/actor"), Path("."), ("cross",), source=ACTORS["val_ict_2102"])
+    data = BENCHMARKS.parents[1] / "shared" / "data"
+    if not (data / "cmu-mocap" / "131_02.bvh").is_file():
+        pytest.skip(f"{data}: the shared CMU mocap is not here")
+    crossed, driving = skull_trajectory(cross, data, 60.0), skull_trajectory(their_run, data, 60.0)
+    np.testing.assert_array_equal(crossed.orient, driving.orient)
+    names = ("jawOpen", "mouthFunnel", "mouthSmile_L")
+    np.testing.assert_array_equal(expression_weights(cross, names, data, 60.0, 90), expression_weights(walk, names, data, 60.0, 90))
