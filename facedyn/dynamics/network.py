@@ -93,12 +93,14 @@ class Network(nn.Module):
         if ds + items.shape[-1] != self.spec.inputs:
             raise ValueError(f"inputs of sizes {ds} + {items.shape[-1]} do not add up to the network's {self.spec.inputs}")
         first = self.layers[0]
-        per_row = nn.functional.linear((shared - self.input_mean[:ds]) / self.input_std[:ds], first.weight[:, :ds], first.bias)
+        # split, not two slices: its backward joins the two gradients in one copy (a slice's pads with zeros)
+        w_shared, w_items = first.weight.split([ds, self.spec.inputs - ds], dim=1)
+        per_row = nn.functional.linear((shared - self.input_mean[:ds]) / self.input_std[:ds], w_shared, first.bias)
         # index_select, not per_row[rows]: its backward adds the rows' gradients in a fixed order, so training is
-        # repeatable on several threads (advanced indexing's is not)
-        h = nn.functional.linear((items - self.input_mean[ds:]) / self.input_std[ds:], first.weight[:, ds:]) + per_row.index_select(0, rows)
-        for layer in self.layers[1:]:
-            h = layer(h)
+        # repeatable on several threads (advanced indexing's is not); the items' part is added to its copy in place
+        h = per_row.index_select(0, rows).addmm_((items - self.input_mean[ds:]) / self.input_std[ds:], w_items.T)
+        for layer in self.layers[1:]:  # ReLU in place: its input is no one else's
+            h = h.relu_() if isinstance(layer, nn.ReLU) else layer(h)
         return h
 
     def normalize_targets(self, y: torch.Tensor) -> torch.Tensor:

@@ -123,8 +123,10 @@ class PairSet(Resident):
         window (F, 2w + 1) each frame's window into them; targets (F, S, 3); positions (F, S, 3) or None."""
         self.samples = velocities.shape[1]
         self.skull = torch.from_numpy(skull).to(device)
-        self.velocities = torch.from_numpy(velocities).to(device)
-        self.window = torch.from_numpy(np.ascontiguousarray(window, np.int64)).to(device)
+        runs, self.run_start = _window_runs(torch.from_numpy(velocities).to(device),
+                                            torch.from_numpy(np.ascontiguousarray(window, np.int64)).to(device))
+        self.run_rows = runs.shape[1]
+        self.windows = runs.view(-1).unfold(0, window.shape[1] * 3, 3)  # row r: the 2w + 1 velocities from flat row r of runs
         self.targets = torch.from_numpy(targets).to(device)
         self.positions = None if positions is None else torch.from_numpy(np.asarray(positions, np.float32)).to(device)
 
@@ -132,14 +134,23 @@ class PairSet(Resident):
         return len(self.skull) * self.samples
 
     def skin(self, f: torch.Tensor, s: torch.Tensor) -> torch.Tensor:
-        """(B, Di) skin inputs of pairs (f, s): the window of velocities, then the rest position."""
-        x = self.velocities[self.window[f], s[:, None]].reshape(len(f), -1)
-        return x if self.positions is None else torch.cat([x, self.positions[f, s]], dim=1)
+        """(B, Di) skin inputs of pairs (f, s): the window of velocities, then the rest position.
+
+        A pair's window is one run of the sample's rows of `runs` (_window_runs), read as a
+        single row of an overlapping view: a gather per pair, not one per frame of its window.
+        """
+        x = self.windows.index_select(0, self.run_start.index_select(0, f) + s * self.run_rows)
+        return x if self.positions is None else torch.cat([x, self._pairs(self.positions, f * self.samples + s)], dim=1)
+
+    @staticmethod
+    def _pairs(values: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
+        """values (F, S, 3) at flat pair indices f * S + s."""
+        return values.view(-1, values.shape[-1]).index_select(0, pairs)
 
     def gather(self, idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         f = idx // self.samples
         s = idx % self.samples
-        return torch.cat([self.skull[f], self.skin(f, s)], dim=1), self.targets[f, s]
+        return torch.cat([self.skull.index_select(0, f), self.skin(f, s)], dim=1), self._pairs(self.targets, idx)
 
     def batches(self, subsample: float, batch_size: int, generator: torch.Generator, device: torch.device):
         """((skull (U, Ds), skin (B, Di), frame of each pair (B,)), targets (B, 3)) batches.
@@ -152,21 +163,50 @@ class PairSet(Resident):
         """
         frames, samples = len(self.skull), self.samples
         per_frame = min(samples, max(1, int(round(subsample * samples))))
-        pieces = -(-per_frame // PIECE_SAMPLES)
-        kept = torch.rand(frames, samples, generator=generator).argsort(dim=1)[:, :per_frame].reshape(-1)
-        piece_of_pair = torch.arange(frames)[:, None] * pieces + torch.arange(per_frame)[None, :] // PIECE_SAMPLES
-        rank = torch.randperm(frames * pieces, generator=generator)
-        order = torch.argsort(rank[piece_of_pair.reshape(-1)], stable=True).to(device)  # pairs, piece by piece
-        pair_frames = (torch.arange(frames * per_frame, device=device) // per_frame)
-        kept = kept.to(device)
+        kept = torch.rand(frames, samples, generator=generator).argsort(dim=1)[:, :per_frame].reshape(-1).to(device)
+        order = _piece_order(torch.randperm(frames * -(-per_frame // PIECE_SAMPLES), generator=generator), per_frame).to(device)
         for start in range(0, len(order), batch_size):
-            picked = order[start: start + batch_size]
-            f, s = pair_frames[picked], kept[picked]
+            picked = order[start: start + batch_size]  # pair k is sample kept[k] of frame k // per_frame
+            f, s = picked // per_frame, kept.index_select(0, picked)
             unique, rows = torch.unique(f, return_inverse=True)
-            yield (self.skull[unique], self.skin(f, s), rows), self.targets[f, s]
+            yield (self.skull.index_select(0, unique), self.skin(f, s), rows), self._pairs(self.targets, f * samples + s)
 
     def normalized(self, network: Network, inputs) -> torch.Tensor:
         return network.normalized_split(*inputs)
+
+
+def _window_runs(velocities: torch.Tensor, window: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(runs (S, R, 3), start (F,)) with runs[s, start[k] + j] = velocities[window[k, j], s].
+
+    velocities (V, S, 3), window (F, 2w + 1). A window of consecutive rows (a frame whose
+    window lies inside its take) starts at its first row; any other (one reaching past the
+    take's ends into the zero row) gets a copy of its rows, appended after the V. Sample by
+    sample, every window is then one run of 2w + 1 rows, which PairSet.skin gathers as one.
+    """
+    span = window.shape[1]
+    regular = (window == window[:, :1] + torch.arange(span, device=window.device)).all(dim=1)
+    copies = window[~regular].reshape(-1)
+    start = torch.where(regular, window[:, 0], len(velocities) + (torch.cumsum(~regular, 0) - 1) * span)
+    runs = velocities.transpose(0, 1)
+    if len(copies):
+        runs = torch.cat([runs, runs.index_select(1, copies)], dim=1)
+    return runs.contiguous(), start
+
+
+def _piece_order(rank: torch.Tensor, per_frame: int) -> torch.Tensor:
+    """The pairs (k: the kept sample k % per_frame of frame k // per_frame) piece by piece,
+    pieces in the order of their `rank`, a piece's pairs in order.
+
+    Pieces are runs of PIECE_SAMPLES pairs of a frame (its last one shorter); piece q of
+    frame f is number f * pieces + q. The same order as a stable argsort of every pair's
+    piece rank, built in linear time from the inverse permutation instead of sorting.
+    """
+    pieces = -(-per_frame // PIECE_SAMPLES)
+    by_rank = torch.empty_like(rank)
+    by_rank[rank] = torch.arange(len(rank))
+    first = by_rank // pieces * per_frame + by_rank % pieces * PIECE_SAMPLES
+    lengths = (per_frame - by_rank % pieces * PIECE_SAMPLES).clamp_(max=PIECE_SAMPLES)
+    return torch.repeat_interleave(first - (torch.cumsum(lengths, 0) - lengths), lengths) + torch.arange(int(lengths.sum()))
 
 
 def fit(network: Network, train, val, config: TrainConfig, progress: ProgressCallback | None = None,
