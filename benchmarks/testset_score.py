@@ -157,8 +157,8 @@ def read_transfer_recipes(folder: Path, actor: Path, tests: list[str], source_ac
         sys.exit(f"{folder}: has no transfer takes (generate them with --takes transfer or cross)")
     for recipe in recipes:
         expression_take, motion_take = recipe["sources"]
-        missing = [name for name in (expression_take, motion_take) if name not in tests and recipe["kind"] == "transfer"]
-        missing += [expression_take] if recipe["kind"] == "cross" and expression_take not in tests else []
+        needed = (expression_take, motion_take) if recipe["kind"] == "transfer" else (expression_take,)  # a cross take's motion is another actor's
+        missing = [name for name in needed if name not in tests]
         if missing:
             sys.exit(f"{folder}: transfer take {recipe['name']} needs the test takes {missing}, which {actor} lacks")
         if recipe["kind"] == "cross":

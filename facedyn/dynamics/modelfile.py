@@ -139,7 +139,9 @@ class DynamicsModel:
     def torch_network(self) -> Network:
         """The network as a torch module, built once from a loaded model's weights (without a copy): for training or a GPU."""
         if isinstance(self.network, NetworkWeights):
-            self.network = self.network.to_torch()
+            from facedyn.dynamics.network import Network
+
+            self.network = Network.from_weights(self.network)
         return self.network
 
     @property

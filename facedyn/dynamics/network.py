@@ -18,6 +18,7 @@ import torch
 from torch import nn
 
 from facedyn.dynamics.netspec import NetworkSpec
+from facedyn.dynamics.network_weights import NetworkWeights, normalization_state
 from facedyn.errors import FacedynError
 
 REMOVAL_HIDDEN = (128, 128)
@@ -68,14 +69,20 @@ class Network(nn.Module):
         self.register_buffer("output_mean", torch.zeros(spec.outputs))
         self.register_buffer("output_scale", torch.ones(1))
 
+    @classmethod
+    def from_weights(cls, weights: NetworkWeights) -> "Network":
+        """The module holding a model's NumPy weights (no copy, no random initialization: built
+        on the meta device, then given the arrays): what training and GPUs use."""
+        with torch.device("meta"):
+            network = cls(weights.spec)
+        network.load_state_dict({name: torch.from_numpy(value) for name, value in weights.state.items()}, assign=True)
+        return network.eval()
+
     def set_normalization(self, input_mean, input_std, output_mean, output_scale) -> None:
-        """Standardization statistics; zero spreads become 1 so constant inputs pass as 0."""
-        std = np.asarray(input_std, dtype=np.float64)
-        std = np.where(std > 1e-12, std, 1.0)
-        scale = float(output_scale) if output_scale > 1e-12 else 1.0
-        for name, value in (("input_mean", input_mean), ("input_std", std), ("output_mean", output_mean), ("output_scale", [scale])):
+        """Standardization statistics (network_weights.normalization_state: zero spreads become 1)."""
+        for name, value in normalization_state(input_mean, input_std, output_mean, output_scale).items():
             buf = getattr(self, name)
-            buf.copy_(torch.as_tensor(np.asarray(value, dtype=np.float32).reshape(buf.shape)))
+            buf.copy_(torch.as_tensor(value.reshape(buf.shape)))
 
     def normalized(self, x: torch.Tensor) -> torch.Tensor:
         """The network's output in normalized units (what the loss compares)."""

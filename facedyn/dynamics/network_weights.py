@@ -3,24 +3,19 @@
 Importing torch costs a command more than a second on a workstation, more than the network
 itself takes on a thousand frames of a face. So a model read from a file keeps its network
 as these arrays (named as the torch module's state_dict), `remove`, `synthesize` and a
-linear response run the forward pass here on the CPU, and the torch module
-(facedyn.dynamics.network.Network) is built from them, taking the arrays over without a
-copy, only where something trains the network or runs it on a GPU.
+linear response run the forward pass here on the CPU, and the torch module is built from
+them (facedyn.dynamics.network.Network.from_weights, taking the arrays over without a copy)
+only where something trains the network or runs it on a GPU (facedyn.dynamics.inference
+says where a model runs).
 
 The forward pass is the torch module's, in float32: inputs standardized per feature, ReLU
 between the layers, outputs scaled back by one common scale and a per-coordinate mean.
 """
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 
 from facedyn.dynamics.netspec import NetworkSpec
-
-NUMPY = "numpy"  # the `device` that runs the network here, in NumPy
-_GPU_DRIVER_FILES = ("/dev/nvidiactl", "/proc/driver/nvidia")
 
 
 class NetworkWeights:
@@ -47,13 +42,10 @@ class NetworkWeights:
     @classmethod
     def normalized(cls, spec: NetworkSpec, layers: list[tuple[np.ndarray, np.ndarray]], input_mean, input_std, output_mean,
                    output_scale: float) -> "NetworkWeights":
-        """Weights from (weight (out, in), bias) per layer and the statistics, as Network.set_normalization
-        keeps them: a zero spread becomes 1, so a constant input passes as 0."""
-        std = np.asarray(input_std, dtype=np.float64)
-        state = {f"layers.{2 * i}.weight": w for i, (w, _) in enumerate(layers)}
+        """Weights from (weight (out, in), bias) per layer and the statistics (`normalization_state`)."""
+        state = normalization_state(input_mean, input_std, output_mean, output_scale)
+        state.update({f"layers.{2 * i}.weight": w for i, (w, _) in enumerate(layers)})
         state.update({f"layers.{2 * i}.bias": b for i, (_, b) in enumerate(layers)})
-        state.update(input_mean=np.asarray(input_mean), input_std=np.where(std > 1e-12, std, 1.0),
-                     output_mean=np.asarray(output_mean), output_scale=np.array([output_scale if output_scale > 1e-12 else 1.0]))
         return cls(spec, state)
 
     def layers(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -103,16 +95,14 @@ class NetworkWeights:
         h += self.state["output_mean"]
         return h
 
-    def to_torch(self):
-        """The torch Network holding these arrays (no copy, no random initialization): what training and GPUs use."""
-        import torch
 
-        from facedyn.dynamics.network import Network
-
-        with torch.device("meta"):
-            network = Network(self.spec)
-        network.load_state_dict({name: torch.from_numpy(value) for name, value in self.state.items()}, assign=True)
-        return network.eval()
+def normalization_state(input_mean, input_std, output_mean, output_scale: float) -> dict[str, np.ndarray]:
+    """A network's standardization statistics as float32 arrays, by name; a zero spread becomes 1,
+    so a constant input passes as 0 (the torch module's set_normalization keeps the same)."""
+    std = np.asarray(input_std, dtype=np.float64)
+    scale = float(output_scale) if output_scale > 1e-12 else 1.0
+    return {"input_mean": np.asarray(input_mean, np.float32), "input_std": np.where(std > 1e-12, std, 1.0).astype(np.float32),
+            "output_mean": np.asarray(output_mean, np.float32), "output_scale": np.array([scale], np.float32)}
 
 
 def _state_shapes(spec: NetworkSpec) -> dict[str, tuple[int, ...]]:
@@ -125,39 +115,3 @@ def _state_shapes(spec: NetworkSpec) -> dict[str, tuple[int, ...]]:
         shapes[f"layers.{2 * i}.weight"] = (b, a)
         shapes[f"layers.{2 * i}.bias"] = (b,)
     return shapes
-
-
-def inference_device(device: str) -> str:
-    """Where a model's network runs: ``numpy`` (here, without torch) or a torch device name.
-
-    'auto' is a CUDA GPU when this machine has one that torch can use, else NumPy; the
-    driver's files are looked at first, so a machine without a GPU never imports torch.
-    """
-    if device != "auto":
-        return device
-    if "torch" not in sys.modules and not any(os.path.exists(path) for path in _GPU_DRIVER_FILES):
-        return NUMPY
-    import torch
-
-    return "cuda" if torch.cuda.is_available() else NUMPY
-
-
-def network_runner(model, device: str, split: bool = False):
-    """A model's network as a function of NumPy arrays returning one: its forward pass, or
-    with `split` its forward_split (shared, items), run here in NumPy or by torch on `device`."""
-    where = inference_device(device)
-    if where == NUMPY:
-        weights = model.weights
-        return weights.forward_split if split else weights.forward
-    import torch
-
-    from facedyn.dynamics.network import resolve_device
-
-    network = model.torch_network().to(resolve_device(where)).eval()
-    dev = next(network.parameters()).device
-    method = network.forward_split if split else network.forward
-
-    def run(*arrays: np.ndarray) -> np.ndarray:
-        with torch.inference_mode():
-            return method(*(torch.from_numpy(np.ascontiguousarray(a)).to(dev) for a in arrays)).cpu().numpy()
-    return run

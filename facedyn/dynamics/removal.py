@@ -19,7 +19,7 @@ import numpy as np
 
 from facedyn.dynamics.features import check_fps, compute_features
 from facedyn.dynamics.modelfile import DynamicsModel, affordable_frames
-from facedyn.dynamics.network_weights import network_runner
+from facedyn.dynamics.inference import network_runner
 from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.spikes import replace_spikes
 from facedyn.geometry import quaternion

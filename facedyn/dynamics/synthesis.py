@@ -21,7 +21,7 @@ import numpy as np
 
 from facedyn.dynamics.features import check_fps
 from facedyn.dynamics.modelfile import DynamicsModel, affordable_frames
-from facedyn.dynamics.network_weights import network_runner
+from facedyn.dynamics.inference import network_runner
 from facedyn.dynamics.response import is_linear_response, synthesized_dynamics
 from facedyn.dynamics.skull import check_points, check_transforms
 from facedyn.dynamics.stretch import UVNeighbourhoods, stretch_features

@@ -224,9 +224,13 @@ def single_input(request: Request, what: str = "TAKE") -> Path:
     return Path(request.inputs[0])
 
 
-def check_inference_device(text: str) -> str | None:
+def _check_inference_device(text: str) -> str | None:
     """Where a model's network runs: numpy (on the CPU, no torch) or a torch device (check_device)."""
     return None if text == "numpy" else check_device(text)
+
+
+INFERENCE_DEVICE = Parameter("device", str, "auto", "where the network runs: auto (a CUDA GPU if there is one, else numpy), "
+                             "numpy (the CPU, without torch), or a torch device: cpu, cuda, cuda:N", check=_check_inference_device)
 
 
 def check_device(text: str) -> str | None:

@@ -23,7 +23,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from facedyn.performance import BACKENDS, QUASISTATIC
-from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_inference_device
+from facedyn.processors.base import INFERENCE_DEVICE, LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.processors.model_steps import OffsetStats, model_inputs, model_windows, removal_blend, removal_of, take_reader
 from facedyn.progress import Progress
 
@@ -41,8 +41,7 @@ class RemoveProcessor(Processor):
         Parameter("blend", Path, None, "a second removal model or linear response: remove the mean of the two models' dynamics",
                   metavar="MODEL"),
         Parameter("backend", str, "auto", "feature and Laplacian kernels", BACKENDS),
-        Parameter("device", str, "auto", "where the network runs: auto (a CUDA GPU if there is one, else numpy), numpy "
-                  "(the CPU, without torch), or a torch device: cpu, cuda, cuda:N", check=check_inference_device),
+        INFERENCE_DEVICE,
     )
 
     def prepare(self, request: Request) -> Plan:

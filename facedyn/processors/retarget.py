@@ -14,7 +14,7 @@ import numpy as np
 
 from facedyn.errors import UsageError
 from facedyn.performance import BACKENDS, QUASISTATIC, RETARGETED, SYNTHESIZED
-from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_inference_device, single_input
+from facedyn.processors.base import INFERENCE_DEVICE, LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, single_input
 from facedyn.processors.model_steps import SYNTHESIZES, OffsetStats, model_windows, reader_with_model, synthesized_chunk, synthesized_layer
 from facedyn.progress import Progress
 
@@ -30,8 +30,7 @@ class RetargetProcessor(Processor):
         Parameter("model", Path, None, "actor B's synthesis model: network H or its linear response (method synthesis)", metavar="MODEL"),
         Parameter("method", str, "synthesis", "synthesis (B's network H) or delta-transfer (copy A's offsets)", ("synthesis", "delta-transfer")),
         Parameter("backend", str, "auto", "stretch kernels", BACKENDS),
-        Parameter("device", str, "auto", "where the network runs: auto (a CUDA GPU if there is one, else numpy), numpy "
-                  "(the CPU, without torch), or a torch device: cpu, cuda, cuda:N", check=check_inference_device),
+        INFERENCE_DEVICE,
     )
 
     def prepare(self, request: Request) -> Plan:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from facedyn.errors import UsageError
 from facedyn.performance import BACKENDS, SYNTHESIZED
-from facedyn.processors.base import LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, check_inference_device
+from facedyn.processors.base import INFERENCE_DEVICE, LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes
 from facedyn.processors.model_steps import SYNTHESIZES, OffsetStats, model_windows, reader_with_model, synthesized_chunk, synthesized_layer
 from facedyn.progress import Progress
 
@@ -40,8 +40,7 @@ class SynthesizeProcessor(Processor):
         *BVH_PARAMETERS,
         Parameter("seed", int, 0, "seed of a procedural motion", minimum=0),
         Parameter("backend", str, "auto", "stretch kernels", BACKENDS),
-        Parameter("device", str, "auto", "where the network runs: auto (a CUDA GPU if there is one, else numpy), numpy "
-                  "(the CPU, without torch), or a torch device: cpu, cuda, cuda:N", check=check_inference_device),
+        INFERENCE_DEVICE,
     )
 
     def prepare(self, request: Request) -> Plan:

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 import torch
 
-from facedyn.dynamics import network_weights
+from facedyn.dynamics import inference
+from facedyn.dynamics.inference import NUMPY, inference_device
 from facedyn.dynamics.netspec import NetworkSpec
 from facedyn.dynamics.network import Network, removal_spec
-from facedyn.dynamics.network_weights import NUMPY, NetworkWeights, inference_device
+from facedyn.dynamics.network_weights import NetworkWeights
 
 
 def random_network(spec: NetworkSpec) -> Network:
@@ -50,7 +51,7 @@ def test_the_split_pass_is_the_concatenated_one():
 
 def test_the_torch_module_built_from_weights_holds_them_without_a_copy():
     weights = NetworkWeights.of(random_network(removal_spec(30, 9)))
-    module = weights.to_torch()
+    module = Network.from_weights(weights)
     for name, tensor in module.state_dict().items():
         assert np.shares_memory(tensor.numpy(), weights.state[name])
 
@@ -65,7 +66,7 @@ def test_missing_or_misshaped_weights_are_named():
 
 
 def test_auto_runs_in_numpy_where_there_is_no_gpu(monkeypatch):
-    monkeypatch.setattr(network_weights, "_GPU_DRIVER_FILES", ())
+    monkeypatch.setattr(inference, "_GPU_DRIVER_FILES", ())
     expected = "cuda" if torch.cuda.is_available() else NUMPY  # torch is imported here: auto asks it
     assert inference_device("auto") == expected
     assert inference_device("numpy") == NUMPY and inference_device("cuda:1") == "cuda:1"
