@@ -23,7 +23,6 @@ from dataclasses import dataclass, replace
 from os import PathLike
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from facedyn.geometry import quaternion
 from facedyn.io.bvh import head_trajectory
@@ -221,6 +220,8 @@ def resample(trajectory: SkullTrajectory, fps: float, method: str = "cubic") -> 
     new_times = time_grid(0.0, times[-1], fps)
     lo, hi, w = bracket(times, new_times)
     if method == "cubic" and trajectory.frame_count >= 2:
+        from scipy.interpolate import CubicSpline  # here: half a second of start-up for every command that reads a motion
+
         translate = CubicSpline(times, trajectory.translate, axis=0)(new_times)
     else:
         translate = trajectory.translate[lo] * (1 - w)[:, None] + trajectory.translate[hi] * w[:, None]

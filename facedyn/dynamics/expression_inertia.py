@@ -43,7 +43,6 @@ synthesizes with the skull alone, as it did.
 from __future__ import annotations
 
 import numpy as np
-from scipy import fft as sfft
 
 LOWPASS_HZ = 5.0  # below the family's 5-9 Hz tissue band's ring (about 15 % above soft_hz)
 _ORDER = 2  # Butterworth order, run forwards and backwards
@@ -99,6 +98,8 @@ def convolve(kernel: np.ndarray, load: np.ndarray, future: int) -> np.ndarray:
     own load series (F, S, 3): out[t] = sum over lags of K[lag + future] load[t - lag], lags
     -future..past, read as zero outside the take. By FFT: a fit convolves every session take
     several times, which lag by lag took 17x longer."""
+    from scipy import fft as sfft  # here: F's removal reads this module's reach, and SciPy's import is a command's 0.1 s
+
     load = np.asarray(load, dtype=np.float64)
     frames, taps = len(load), len(kernel)
     if frames == 0:

@@ -19,27 +19,73 @@ smoothness check of propagated offsets.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
-from scipy.sparse.linalg import splu
 
 from facedyn.dynamics import propagator_cache
-from facedyn.geometry.mesh import cotangent_laplacian, mass_matrix, unique_edges
+from facedyn.geometry.mesh import cotangent_laplacian, unique_edges, vertex_areas
 from facedyn.kernels import runtime
 
+if TYPE_CHECKING:
+    import scipy.sparse as sp
+
 _APPLY_CHUNK = 64  # frames per matrix product
+
+
+class RestOperators:
+    """The rest mesh's Laplacian, masses and fixed vertices, each built when first asked for.
+
+    Solving P needs all three, the smoothness check the first two; applying a P read from
+    the cache needs none, so a command that only applies a model neither builds them nor
+    imports SciPy.
+    """
+
+    def __init__(self, points: np.ndarray, triangles, samples: np.ndarray, rigid: np.ndarray):
+        self.points, self.triangles, self.samples, self.given_rigid = points, triangles, samples, rigid
+
+    @cached_property
+    def laplacian(self) -> sp.csr_matrix:
+        return cotangent_laplacian(self.points, self.triangles)
+
+    @cached_property
+    def inverse_mass(self) -> np.ndarray:
+        area = vertex_areas(self.points, self.triangles)
+        return np.where(area > 0, 1.0 / np.where(area > 0, area, 1.0), 0.0)
+
+    @cached_property
+    def fixed(self) -> np.ndarray:
+        """(N,) True where u = 0: the given rigid vertices and pieces of mesh with no constraint."""
+        n = len(self.points)
+        fixed = np.zeros(n, bool)
+        fixed[self.given_rigid] = True
+        fixed |= _unconstrained(n, self.triangles, np.concatenate([self.samples, self.given_rigid]))
+        fixed[self.samples] = False
+        return fixed
 
 
 @dataclass
 class Propagator:
     matrix: np.ndarray  # (N, S) float32, P
     samples: np.ndarray  # (S,) int32
-    rigid: np.ndarray  # (R,) int32 (including unconstrained pieces)
-    laplacian: sp.csr_matrix  # (N, N) cotangent Laplacian of the rest mesh
-    inverse_mass: np.ndarray  # (N,) 1 / m_i (0 for vertices in no triangle)
+    operators: RestOperators = field(repr=False)
+
+    @property
+    def rigid(self) -> np.ndarray:
+        """(R,) int32 vertices held at zero (including unconstrained pieces)."""
+        return np.flatnonzero(self.operators.fixed).astype(np.int32)
+
+    @property
+    def laplacian(self) -> sp.csr_matrix:
+        """(N, N) cotangent Laplacian of the rest mesh."""
+        return self.operators.laplacian
+
+    @property
+    def inverse_mass(self) -> np.ndarray:
+        """(N,) 1 / m_i (0 for vertices in no triangle)."""
+        return self.operators.inverse_mass
 
     def apply(self, offsets) -> np.ndarray:
         """(F, S, 3) sample offsets -> (F, N, 3) float32 offsets of every vertex."""
@@ -89,33 +135,24 @@ def build_propagator(rest_points, triangles, samples, rigid=None, cache: bool = 
         raise ValueError("propagation needs at least one sample and distinct sample vertices")
     if np.intersect1d(samples, rigid).size:
         raise ValueError("a vertex cannot be both a sample and rigid")
-    lap = cotangent_laplacian(pts, triangles)
-    area = mass_matrix(pts, triangles).diagonal()
-    inv_mass = np.where(area > 0, 1.0 / np.where(area > 0, area, 1.0), 0.0)
-    fixed = np.zeros(n, bool)
-    fixed[rigid] = True
-    fixed |= _unconstrained(n, triangles, np.concatenate([samples, rigid]))
-    fixed[samples] = False
-    is_sample = np.zeros(n, bool)
-    is_sample[samples] = True
-    free = np.flatnonzero(~fixed & ~is_sample)
+    operators = RestOperators(pts, triangles, samples, rigid)
     cache_key = propagator_cache.key(pts, triangles, samples, rigid) if cache else None
     matrix = propagator_cache.load(cache_key, samples, n) if cache else None
     if matrix is None:
-        matrix = _solve(lap, inv_mass, samples, free, n)
+        is_sample = np.zeros(n, bool)
+        is_sample[samples] = True
+        free = np.flatnonzero(~operators.fixed & ~is_sample)
+        matrix = _solve(operators.laplacian, operators.inverse_mass, samples, free, n)
         if cache:
             propagator_cache.keep(cache_key, matrix)
-    return Propagator(
-        matrix=matrix,
-        samples=samples.astype(np.int32),
-        rigid=np.flatnonzero(fixed).astype(np.int32),
-        laplacian=lap,
-        inverse_mass=inv_mass,
-    )
+    return Propagator(matrix=matrix, samples=samples.astype(np.int32), operators=operators)
 
 
 def _solve(lap: sp.csr_matrix, inv_mass: np.ndarray, samples: np.ndarray, free: np.ndarray, n: int) -> np.ndarray:
     """(N, S) float32 P: the identity at the samples, solved at the free vertices, 0 elsewhere."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+
     p = np.zeros((n, len(samples)))
     p[samples, np.arange(len(samples))] = 1.0
     if free.size:
@@ -128,6 +165,9 @@ def _solve(lap: sp.csr_matrix, inv_mass: np.ndarray, samples: np.ndarray, free: 
 
 def _unconstrained(n: int, triangles, constrained: np.ndarray) -> np.ndarray:
     """(N,) True for vertices whose connected piece of mesh holds no constrained vertex."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
     edges = unique_edges(triangles)
     graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
@@ -168,6 +208,8 @@ def _opencl_apply(csr: sp.csr_matrix, u: np.ndarray) -> np.ndarray:
 
 def _measure(backend: str) -> None:
     """The batch `choose_backend` times: a 2,500-vertex grid Laplacian on 64 frames."""
+    import scipy.sparse as sp
+
     side = 50
     lap = sp.diags([-1.0, -1.0, 4.0, -1.0, -1.0], [-side, -1, 0, 1, side], shape=(side * side, side * side)).tocsr()
     u = np.random.default_rng(0).normal(size=(64, side * side, 3)).astype(np.float32)
@@ -176,6 +218,8 @@ def _measure(backend: str) -> None:
 
 def laplacian_apply(laplacian, u, backend: str = "auto") -> np.ndarray:
     """L @ u[f] for every frame: (N, N) sparse L, (F, N, 3) u -> (F, N, 3) float32."""
+    import scipy.sparse as sp
+
     csr = sp.csr_matrix(laplacian, dtype=np.float32)
     arr = np.asarray(u, dtype=np.float32)
     n = csr.shape[0]

@@ -18,15 +18,14 @@ from pathlib import Path
 import numpy as np
 
 from facedyn import __version__
-from facedyn.io.files import write_atomically
+from facedyn.io.files import user_cache_folder, write_atomically
 
 KEEP = 8  # faces whose P stays cached
 
 
 def folder() -> Path:
     """Where P files are kept: $XDG_CACHE_HOME/facedyn/propagators, else ~/.cache/facedyn/propagators."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "facedyn" / "propagators"
+    return user_cache_folder("propagators")
 
 
 def key(rest_points: np.ndarray, triangles: np.ndarray, samples: np.ndarray, rigid: np.ndarray) -> str:

@@ -25,7 +25,6 @@ Only what F reads is cleaned: the layers keep the capture as it came.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d
 
 from facedyn.stabilize.dropped import bridge_dropped
 
@@ -58,12 +57,23 @@ def replace_spikes(trajectories: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         replaced[dropped] = True
     for _ in range(PASSES):
         predicted, distance, over = _spike_distance(x)
-        spikes = over & (distance >= maximum_filter1d(distance, 5, axis=0))
+        spikes = over & (distance >= _running_max(distance, 2))
         if not spikes.any():
             break
         x[spikes] = predicted[spikes]
         replaced |= spikes
     return x, replaced
+
+
+def _running_max(values: np.ndarray, half: int) -> np.ndarray:
+    """Each frame's maximum over frames t-half..t+half, the take's ends mirrored (SciPy's
+    maximum_filter1d with mode 'reflect', without importing SciPy into every command)."""
+    padded = np.pad(values, [(half, half)] + [(0, 0)] * (values.ndim - 1), mode="symmetric")
+    frames = len(values)
+    out = padded[:frames].copy()
+    for shift in range(1, 2 * half + 1):
+        np.maximum(out, padded[shift:shift + frames], out=out)
+    return out
 
 
 def _spike_distance(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -9,11 +9,19 @@ triangles), so an ICT-sized mesh (about 22k triangles) takes a few tens of milli
 Laplacians use the positive semidefinite sign, ``(L f)_i = sum_j w_ij (f_i - f_j)``: rows
 sum to zero and ``f @ L @ f`` is the (Dirichlet) energy of f, which is what simulators and
 smoothness measures want.
+
+SciPy is imported where an operator is built, not with the module: applying a trained model
+reads meshes through here and never builds one, and SciPy's import is a tenth of a second
+of every such command's start-up.
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import scipy.sparse as sp
+
+if TYPE_CHECKING:
+    import scipy.sparse as sp
 
 # A triangle whose doubled area is below this fraction of its longest edge squared is
 # degenerate: its cotangents would be huge and meaningless, so it adds nothing.
@@ -80,6 +88,8 @@ def cotangent_laplacian(points: np.ndarray, triangles: np.ndarray, nonnegative: 
     such edges but makes L an M-matrix (neighbours never push each other apart), the form
     a simulator wants on an arbitrary scanned mesh.
     """
+    import scipy.sparse as sp
+
     pts, tri, n = _check(points, triangles)
     cot = corner_cotangents(pts, tri)
     i = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0]])  # edge opposite corner k: (k+1, k+2)
@@ -96,6 +106,8 @@ def cotangent_laplacian(points: np.ndarray, triangles: np.ndarray, nonnegative: 
 
 def uniform_laplacian(triangles: np.ndarray, n_points: int | None = None) -> sp.csr_matrix:
     """The graph Laplacian D - A of the mesh edges (weight 1 per edge), (N, N) CSR."""
+    import scipy.sparse as sp
+
     _, tri, n = _check(None, triangles, n_points)
     e = unique_edges(tri)
     ones = np.ones(len(e))
@@ -145,6 +157,8 @@ def vertex_areas(points: np.ndarray, triangles: np.ndarray, kind: str = "voronoi
 
 def mass_matrix(points: np.ndarray, triangles: np.ndarray, kind: str = "voronoi") -> sp.csr_matrix:
     """Diagonal lumped mass (area) matrix, (N, N) CSR; see `vertex_areas`."""
+    import scipy.sparse as sp
+
     return sp.diags(vertex_areas(points, triangles, kind)).tocsr()
 
 
@@ -174,6 +188,8 @@ class VertexNormals:
         self.triangles = tris.astype(np.int64)
         self.point_count = int(point_count)
         self.dtype = dtype
+        import scipy.sparse as sp
+
         t = len(tris)
         rows = self.triangles.ravel()
         cols = np.repeat(np.arange(t), 3)

@@ -21,13 +21,15 @@ from dataclasses import dataclass, replace
 from os import PathLike
 
 import numpy as np
-from scipy.constants import g as G_M_S2
 
 from facedyn.errors import UsageError
 from facedyn.geometry import quaternion
 from facedyn.io.errors import InputError, quoted
 from facedyn.io.files import read_lines
 from facedyn.performance import SkullTrajectory
+
+G_M_S2 = 9.80665
+"""Standard gravity, m/s^2 (SciPy's constants.g, without SciPy's import)."""
 
 CMU_UNIT_CM = 5.64
 """Centimetres per BVH unit in the CMU database: its "scaled inches" (1 unit = 1/0.45 in)."""

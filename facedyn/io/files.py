@@ -134,6 +134,12 @@ def _new_file_mode() -> int:
     return 0o666 & ~mask
 
 
+def user_cache_folder(*parts: str) -> Path:
+    """facedyn's folder under $XDG_CACHE_HOME (else ~/.cache), joined with parts: what a later run may reuse."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base, "facedyn", *parts)
+
+
 def sha256_of_file(path: str | PathLike, block: int = 1 << 22) -> str:
     """The sha256 (hex) of a file's bytes, streamed a block at a time: never the whole file in memory."""
     digest = hashlib.sha256()

@@ -18,13 +18,22 @@ from run to run: each decision is made once per machine, device and facedyn vers
 kept in a small JSON file (`cache_path`, under $XDG_CACHE_HOME or ~/.cache), so the same
 inputs give the same bytes on every run. ``FACEDYN_BACKEND=opencl|numpy`` overrides
 ``auto`` for the process; `backend_report` says what was chosen, why and where it is kept.
+
+Opening OpenCL costs a command a tenth of a second (pyopencl's import, the platforms, a
+context), so a kernel whose kept decision is NumPy does not open it: the file also maps a
+fingerprint of the OpenCL installation (`installation`, read from files without opening
+OpenCL) to the device key it opened, and a process whose installation is known reads the
+decision through it.
 """
 from __future__ import annotations
 
 import contextlib
+import glob
 import hashlib
+import importlib.util
 import json
 import os
+import platform
 import threading
 import time
 from pathlib import Path
@@ -33,13 +42,16 @@ from typing import Callable
 from facedyn import __version__
 from facedyn.errors import FacedynError
 from facedyn.io.errors import InputError
-from facedyn.io.files import read_text, write_atomically
+from facedyn.io.files import read_text, user_cache_folder, write_atomically
 
 BACKENDS = ("auto", "opencl", "numpy")
 BACKEND_ENV = "FACEDYN_BACKEND"
 MEASURE_ROUNDS = 3  # timed runs per backend when auto measures
 KERNEL_DIR = Path(__file__).resolve().parent
 _CACHE_MAX_BYTES = 1 << 20
+_INSTALLATIONS = "installations"  # the decision file's {installation fingerprint: device key}
+_STEERING_ENV = ("PYOPENCL_CTX", "OCL_ICD_VENDORS", "OCL_ICD_FILENAMES", "POCL_DEVICES", "CUDA_VISIBLE_DEVICES",
+                 "ROCR_VISIBLE_DEVICES")  # variables that change which device a process opens
 
 
 class OpenCLUnavailable(FacedynError):
@@ -190,12 +202,17 @@ def choose_backend(requested: str, kernel_name: str, measure: Callable[[str], ob
     if requested == "opencl":
         runtime()
         return "opencl"
+    if kernel_name not in _choices and _kept_without_opening(kernel_name) == "numpy":
+        _choices[kernel_name] = "numpy"
+    if _choices.get(kernel_name) == "numpy":
+        return "numpy"
     if not available():
         return "numpy"
     if kernel_name not in _choices:
         kept = _kept_decisions().get(kernel_name)
         if kept is not None:
             _choices[kernel_name] = kept["backend"]
+            _note_installation()
         elif is_gpu():
             _choices[kernel_name] = _keep(kernel_name, "opencl", "a GPU device")
         elif measure is None:
@@ -227,8 +244,7 @@ def _override() -> str | None:
 
 def cache_path() -> Path:
     """Where backend decisions are kept: $XDG_CACHE_HOME/facedyn/backends.json, else ~/.cache/facedyn/."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "facedyn" / "backends.json"
+    return user_cache_folder("backends.json")
 
 
 def device_key() -> str:
@@ -236,6 +252,75 @@ def device_key() -> str:
     device = runtime().device
     parts = (device.platform.name, device.platform.version, device.name, device.driver_version)
     return " | ".join(str(part).strip() for part in parts) + f" | facedyn {__version__}"
+
+
+def installation() -> str:
+    """A fingerprint of what decides which device this process opens, read without opening
+    OpenCL: the host, this facedyn, the variables that steer the choice, the ICD vendor files
+    and the libraries they name, pyopencl's package, and the GPU device nodes. A driver
+    installed, updated or removed, or a GPU added, gives another fingerprint."""
+    parts = [platform.node(), f"facedyn {__version__}"]
+    parts += [f"{name}={os.environ.get(name, '')}" for name in _STEERING_ENV]
+    vendors = Path(os.environ.get("OCL_ICD_VENDORS") or "/etc/OpenCL/vendors")
+    for icd in sorted(vendors.glob("*.icd")) if vendors.is_dir() else [vendors]:
+        try:
+            library = icd.read_text(errors="replace").strip()
+        except OSError:
+            library = None
+        parts.append(f"{icd}: {library} {_stamp(library)}")
+    spec = importlib.util.find_spec("pyopencl")
+    parts.append(f"pyopencl {_stamp(spec.origin if spec else None)}")
+    parts += sorted(glob.glob("/dev/nvidia*") + glob.glob("/dev/dri/*") + glob.glob("/dev/kfd"))
+    return hashlib.sha256("\n".join(str(part) for part in parts).encode()).hexdigest()[:32]
+
+
+def _stamp(path: str | None) -> str:
+    """A file's size and modification time, or why there is none (a bare library name: the linker's to find)."""
+    try:
+        info = os.stat(path)
+    except (OSError, TypeError, ValueError):
+        return "-"
+    return f"{info.st_size} {info.st_mtime_ns}"
+
+
+def _kept_without_opening(kernel_name: str) -> str | None:
+    """The backend kept for `kernel_name` on the device this installation opened before, or None when unknown."""
+    data = _read_cache()
+    known = data.get(_INSTALLATIONS)
+    key = known.get(installation()) if isinstance(known, dict) else None
+    entries = data.get(key) if isinstance(key, str) else None
+    entry = entries.get(kernel_name) if isinstance(entries, dict) else None
+    return entry.get("backend") if isinstance(entry, dict) else None
+
+
+def _note_installation() -> None:
+    """Map this installation to its device key in the decision file, if it is not yet (see `installation`)."""
+    known = _read_cache().get(_INSTALLATIONS)
+    if isinstance(known, dict) and known.get(installation()) == device_key():
+        return
+    _update_cache(lambda data: None)
+
+
+def _update_cache(change: Callable[[dict], str | None]) -> str | None:
+    """Apply `change` to the decision file under its lock and write it back, with this installation mapped
+    to its device key; returns what `change` returned. A file that cannot be written is a problem reported
+    by backend_report, and None."""
+    path = cache_path()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with _locked(path.with_name(path.name + ".lock")):
+            data = _read_cache()
+            result = change(data)
+            known = data.get(_INSTALLATIONS)
+            if not isinstance(known, dict):
+                known = data[_INSTALLATIONS] = {}
+            known[installation()] = device_key()
+            text = json.dumps(data, indent=1, sort_keys=True) + "\n"
+            write_atomically(path, lambda out: out.write(text.encode()))
+            return result
+    except OSError as exc:
+        _problem(f"cannot write {path}: {exc.strerror or exc}; decisions last for this process only")
+    return None
 
 
 def _read_cache() -> dict:
@@ -269,23 +354,17 @@ def _keep(kernel_name: str, backend: str, reason: str) -> str:
     """Keep a decision for this device, unless another process kept one first (then that
     one is returned, so that concurrent runs agree); a cache that cannot be written
     leaves the decision to this process (see backend_report)."""
-    path = cache_path()
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with _locked(path.with_name(path.name + ".lock")):
-            data = _read_cache()
-            entries = data.get(device_key())
-            if not isinstance(entries, dict):
-                entries = data[device_key()] = {}
-            kept = entries.get(kernel_name)
-            if isinstance(kept, dict) and kept.get("backend") in ("opencl", "numpy"):
-                return kept["backend"]
-            entries[kernel_name] = {"backend": backend, "reason": reason}
-            text = json.dumps(data, indent=1, sort_keys=True) + "\n"
-            write_atomically(path, lambda out: out.write(text.encode()))
-    except OSError as exc:
-        _problem(f"cannot write {path}: {exc.strerror or exc}; decisions last for this process only")
-    return backend
+    def change(data: dict) -> str:
+        entries = data.get(device_key())
+        if not isinstance(entries, dict):
+            entries = data[device_key()] = {}
+        kept = entries.get(kernel_name)
+        if isinstance(kept, dict) and kept.get("backend") in ("opencl", "numpy"):
+            return kept["backend"]
+        entries[kernel_name] = {"backend": backend, "reason": reason}
+        return backend
+
+    return _update_cache(change) or backend
 
 
 def _problem(message: str) -> None:
@@ -317,6 +396,7 @@ def backend_report() -> dict:
         "device": None,
         "opencl_unavailable": unavailable_reason(),
         "device_key": None,
+        "installation": installation(),
         "cache": str(cache_path()),
         "decisions": {},
         "cache_problems": [],

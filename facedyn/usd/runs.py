@@ -22,6 +22,7 @@ from pathlib import Path
 
 from pxr import Sdf, Tf
 
+from facedyn.io import digests
 from facedyn.io.files import sha256_of_file
 from facedyn.usd.clips import CLIPS_SUFFIX, clips_folder, glob_escape
 
@@ -121,13 +122,13 @@ def _file_digest(path: str | os.PathLike) -> str:
 
     Remembered for the life of the process per file identity and change time (inode, size,
     mtime and ctime, which no tool sets back), so a step that reads a layer and then checks
-    its stack hashes it once.
+    its stack hashes it once, and kept on disk for later commands (facedyn.io.digests).
     """
     path = Path(path).resolve()
     stat = path.stat()
     key = (str(path), stat.st_dev, stat.st_ino, stat.st_size, stat.st_mtime_ns, stat.st_ctime_ns)
     if key not in _DIGESTS:
-        _DIGESTS[key] = sha256_of_file(path, BLOCK)[:ID_LENGTH]
+        _DIGESTS[key] = digests.digest(path, lambda file: sha256_of_file(file, BLOCK)[:ID_LENGTH])
     return _DIGESTS[key]
 
 

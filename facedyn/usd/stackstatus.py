@@ -131,8 +131,12 @@ def read_entries(layer: Sdf.Layer, anchor_dir: Path, assets: list[str] | None = 
     return [Entry.read(a, anchor_dir, known) for a in (layer.subLayerPaths if assets is None else assets)]
 
 
-def stack_status(root: str | os.PathLike) -> list[LayerStatus]:
-    """Every layer of the root, strongest first, then the layers muted on disk."""
+def stack_status(root: str | os.PathLike, below_rank: int | None = None) -> list[LayerStatus]:
+    """Every layer of the root, strongest first, then the layers muted on disk.
+
+    below_rank: only the unmuted layers of a lower rank (what a step of that rank reads), so
+    that checking them does not hash the layers above (the step's own old output among them).
+    """
     root = Path(root)
     layer = open_root(root)
     itself = root.resolve()
@@ -143,12 +147,14 @@ def stack_status(root: str | os.PathLike) -> list[LayerStatus]:
     known = roles()
     statuses = []
     for i, entry in enumerate(entries):
+        if below_rank is not None and (entry.rank is None or entry.rank >= below_rank):
+            continue
         below = [e for e, r in zip(entries[i + 1 :], ranks[i + 1 :]) if r < ranks[i]]
         reason, unchecked = staleness(entry, below)
         needs = known[entry.role_name].reads if entry.role_name in known else None
         missing_source = needs if needs and not any(e.role_name == needs for e in entries[i + 1 :]) else ""
         statuses.append(_status(entry, False, take, reason, missing_source, unchecked))
-    return statuses + [_status(entry, True, take, "") for entry in muted]
+    return statuses if below_rank is not None else statuses + [_status(entry, True, take, "") for entry in muted]
 
 
 def _status(entry: Entry, muted: bool, take: tuple[float, float] | None, reason: str, needs: str = "",
@@ -179,8 +185,7 @@ def _unreadable(path: Path, special: str | None) -> str:
 
 def stale_below(root: str | os.PathLike, role_name: str) -> list[LayerStatus]:
     """The layers a step writing role_name would read (those of lower rank) that are stale or missing."""
-    rank = roles()[role_name].rank
-    return [s for s in stack_status(root) if not s.muted and s.rank is not None and s.rank < rank and s.state in ("stale", "missing")]
+    return [s for s in stack_status(root, below_rank=roles()[role_name].rank) if s.state in ("stale", "missing")]
 
 
 def lists_itself(root: str | os.PathLike) -> str | None:

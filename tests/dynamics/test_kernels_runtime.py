@@ -106,7 +106,35 @@ def test_a_decision_is_kept_across_runs_so_outputs_repeat(monkeypatch, cpu_devic
     monkeypatch.setattr(runtime, "_choices", {})
     monkeypatch.setattr(runtime, "device_key", lambda: "Test platform | 1.0 | test CPU | 2.0 | facedyn 0")
     assert runtime.choose_backend("auto", "features", timed("numpy")) == "numpy"
-    assert len(json.loads(runtime.cache_path().read_text())) == 2
+    assert len(set(json.loads(runtime.cache_path().read_text())) - {"installations"}) == 2
+
+
+def test_a_kept_numpy_decision_is_read_without_opening_opencl(monkeypatch, cpu_device):
+    """OpenCL costs a command 0.1 s to open: a kernel kept on NumPy does not open it again."""
+    assert runtime.choose_backend("auto", "features", timed("numpy")) == "numpy"
+    assert runtime.choose_backend("auto", "stretch", timed("opencl")) == "opencl"
+
+    def opening():
+        raise AssertionError("OpenCL opened")
+
+    monkeypatch.setattr(runtime, "_choices", {})  # a new process on the same installation
+    monkeypatch.setattr(runtime, "available", opening)
+    assert runtime.choose_backend("auto", "features") == "numpy"
+    with pytest.raises(AssertionError, match="OpenCL opened"):
+        runtime.choose_backend("auto", "stretch")  # an OpenCL decision needs the device anyway
+    monkeypatch.setattr(runtime, "_choices", {})
+    monkeypatch.setattr(runtime, "installation", lambda: "another installation")  # e.g. a GPU driver installed
+    with pytest.raises(AssertionError, match="OpenCL opened"):
+        runtime.choose_backend("auto", "features")
+
+
+def test_the_installation_changes_with_a_driver(monkeypatch, tmp_path):
+    monkeypatch.setenv("OCL_ICD_VENDORS", str(tmp_path))
+    (tmp_path / "pocl.icd").write_text("libpocl.so.2\n")
+    before = runtime.installation()
+    assert runtime.installation() == before
+    (tmp_path / "nvidia.icd").write_text("libnvidia-opencl.so.1\n")
+    assert runtime.installation() != before
 
 
 def _umask():
@@ -167,6 +195,7 @@ def test_backend_report(monkeypatch, cpu_device):
         "device": "test CPU (Test platform)",
         "opencl_unavailable": None,
         "device_key": "Test platform | 1.0 | test CPU | 1.0 | facedyn 0",
+        "installation": runtime.installation(),
         "cache": str(runtime.cache_path()),
         "decisions": {"features": {"backend": "opencl", "reason": report["decisions"]["features"]["reason"]}},
         "cache_problems": [],

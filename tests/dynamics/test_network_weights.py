@@ -80,23 +80,25 @@ from facedyn.dynamics.removal import remove_dynamics
 model = load_model(sys.argv[1])
 points = np.repeat(model.face.rest_points[None], 30, 0) + np.random.default_rng(0).normal(0, 0.01, (30, model.face.point_count, 3))
 _, offsets = remove_dynamics(points, None, None, model.fps, model, "numpy", device="numpy")
-print(json.dumps({"torch": "torch" in sys.modules, "offsets": offsets.tolist()}))
+print(json.dumps({"torch": "torch" in sys.modules, "scipy": "scipy" in sys.modules, "offsets": offsets.tolist()}))
 """
 
 
-def test_a_loaded_model_is_applied_without_importing_torch(tmp_path):
-    """Loading and applying a model (what remove and synthesize do) never pays for torch's import."""
+def test_a_loaded_model_is_applied_without_importing_torch_or_scipy(tmp_path, monkeypatch):
+    """Loading and applying a model (what remove and synthesize do) never pays for torch's import, nor,
+    once its face's propagation is kept on disk, for SciPy's."""
     from test_modelfile import make_model
 
     from facedyn.dynamics.modelfile import load_model, save_model
     from facedyn.dynamics.removal import remove_dynamics
 
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))  # inherited by the subprocess
     path = save_model(make_model(), tmp_path / "f.removal")
-    done = subprocess.run([sys.executable, "-c", APPLY_WITHOUT_TORCH, str(path)], capture_output=True, text=True, check=True)
-    result = json.loads(done.stdout)
-    assert result["torch"] is False
     model = load_model(path)
     points = np.repeat(model.face.rest_points[None], 30, 0) + np.random.default_rng(0).normal(0, 0.01, (30, model.face.point_count, 3))
-    _, by_torch = remove_dynamics(points, None, None, model.fps, model, "numpy", device="cpu")
+    _, by_torch = remove_dynamics(points, None, None, model.fps, model, "numpy", device="cpu")  # solves and keeps P
     assert np.abs(by_torch).max() > 0
+    done = subprocess.run([sys.executable, "-c", APPLY_WITHOUT_TORCH, str(path)], capture_output=True, text=True, check=True)
+    result = json.loads(done.stdout)
+    assert result["torch"] is False and result["scipy"] is False
     np.testing.assert_allclose(np.array(result["offsets"], np.float32), by_torch, rtol=1e-4, atol=1e-5 * np.abs(by_torch).max())

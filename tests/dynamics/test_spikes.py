@@ -67,3 +67,15 @@ def test_the_threshold_by_counting_is_the_median_filters_threshold():
         expected = distance > np.maximum(spikes.SPIKE_FACTOR * typical, spikes.FLOOR_CM)
         assert expected.any()
         np.testing.assert_array_equal(spikes._over_threshold(distance), expected)
+
+
+@pytest.mark.parametrize("frames", [5, 6, 9, 150])
+def test_the_running_maximum_is_scipys_maximum_filter(frames):
+    """A spike is the largest distance within two frames either side, the take's ends mirrored as SciPy's
+    maximum_filter1d mirrors them (computed without SciPy, which every remove would otherwise import)."""
+    from scipy.ndimage import maximum_filter1d
+
+    from facedyn.dynamics.spikes import _running_max
+
+    distance = np.random.default_rng(frames).random((frames, 40))
+    assert np.array_equal(_running_max(distance, 2), maximum_filter1d(distance, 5, axis=0))

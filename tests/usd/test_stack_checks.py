@@ -165,3 +165,18 @@ def test_inspect_and_the_layer_listing_show_role_and_staleness(tmp_path):
     assert listing[0].split() == ["./synthesized.hop.usdc", "synthesized", "synthesize", "1001..1010", "stale"]
     assert listing[-1].split() == ["./take.preview.usdc", "preview", "preview", "1001..1010", "muted"]
     assert sublayers(root)[0] == "./synthesized.hop.usdc"
+
+
+def test_checking_what_a_step_reads_hashes_nothing_above_it(tmp_path, monkeypatch):
+    """A step checks the layers it reads; its own old output and what was computed from it are not its inputs
+    (on a 1,000-frame ICT take, hashing them cost remove a third of a second)."""
+    from facedyn.usd import runs
+    from facedyn.usd.stackstatus import stale_below
+
+    root = build_take(tmp_path)
+    hashed = []
+    digest = runs._file_digest
+    monkeypatch.setattr(runs, "_file_digest", lambda path: hashed.append(path.name) or digest(path))
+    assert stale_below(root, "quasistatic") == []
+    assert "capture.usdc" in hashed  # what the stabilized layer was computed from
+    assert not {"quasistatic.usdc", "synthesized.hop.usdc", "take.preview.usdc"} & set(hashed)
