@@ -64,6 +64,9 @@ SECTIONS = (
     ("bench_corpus_protocol", "The corpus on other rigs",
      "The recommended corpus, the Live Link performances included, simulated on a rig as `usdfacedyn simulate` runs it: "
      "takes written and failed (issue 37: it completes on the built-in face, the ICT rig and an ARKit-named rig)."),
+    ("testset_static", "The test set's static offsets",
+     "How the part of the true dynamics that does not move over a take grows with the motion on the validation actors' "
+     "MuJoCo tissues: a floor under any truth-free method's figure on that take (benchmarks/README-testset.md)."),
     ("bench_motion_spectrum", "Skull motion spectra", "Where the skull's acceleration power lies, 6-15 Hz, procedural gaits beside real mocap."),
     ("tests", "The test suite", "The time of the README's test command."),
     ("testset", "Test set",

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from facedyn import motion
+from facedyn.geometry import quaternion
 from facedyn.performance import SkullTrajectory
 
 LEAD_S = 0.5  # simulated before the first captured frame: the start-up transient dies out there
@@ -51,6 +52,7 @@ class TakeRecipe:
     seed: int = 0
     motion_seed: int | None = None  # the skull trajectory's seed (None: `seed`)
     sources: tuple[str, ...] = ()  # a transfer take's (expression take, motion take); a cross take's motion take is ACTOR/TAKE
+    motion_scale: float = 1.0  # the skull motion's size about its steady path (1: as recorded; testset_static.py varies it)
 
     @property
     def skull_seed(self) -> int:
@@ -58,7 +60,24 @@ class TakeRecipe:
 
 
 def skull_trajectory(recipe: TakeRecipe, data: Path, fps: float) -> SkullTrajectory:
-    """LEAD_S + duration_s of the recipe's skull motion at `fps` (cm, Y up)."""
+    """LEAD_S + duration_s of the recipe's skull motion at `fps` (cm, Y up), scaled by its motion_scale."""
+    trajectory = _recorded_trajectory(recipe, data, fps)
+    return trajectory if recipe.motion_scale == 1.0 else scaled_about_steady_path(trajectory, recipe.motion_scale)
+
+
+def scaled_about_steady_path(trajectory: SkullTrajectory, scale: float) -> SkullTrajectory:
+    """The motion `scale` times as large: the translation about its straight-line fit (steady travel has no
+    acceleration, so it stays), the rotation about its mean orientation."""
+    frames = np.arange(len(trajectory.translate))
+    steady = np.stack([np.polyval(np.polyfit(frames, axis, 1), frames) for axis in trajectory.translate.T], axis=1)
+    mean = quaternion.from_rotvec(quaternion.to_rotvec(trajectory.orient).mean(axis=0))
+    means = np.broadcast_to(mean, trajectory.orient.shape)
+    turn = quaternion.to_rotvec(quaternion.multiply(quaternion.conjugate(means), trajectory.orient))
+    orient = quaternion.multiply(means, quaternion.from_rotvec(scale * turn))
+    return SkullTrajectory(steady + scale * (trajectory.translate - steady), orient, trajectory.fps)
+
+
+def _recorded_trajectory(recipe: TakeRecipe, data: Path, fps: float) -> SkullTrajectory:
     seconds = LEAD_S + recipe.duration_s
     kind, _, arg = recipe.motion.partition(":")
     if kind == "platform":

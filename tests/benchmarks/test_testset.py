@@ -161,6 +161,27 @@ def test_a_faster_mocap_is_the_same_path_in_less_time():
     assert step(fast) == pytest.approx(1.6 * step(normal), rel=0.25)
 
 
+def test_a_scaled_motion_keeps_its_steady_travel_and_scales_the_rest():
+    """testset_static.py's knob: accelerations and turns scaled, the steady path (no load) kept."""
+    from facedyn.geometry import quaternion
+    from facedyn.performance import SkullTrajectory
+    from testset.takes import scaled_about_steady_path
+
+    t = np.arange(120) / 60.0
+    translate = np.stack([130.0 * t, 160 + 1.5 * np.sin(2 * np.pi * 2 * t), 0.3 * np.cos(2 * np.pi * 3 * t)], 1)
+    orient = quaternion.from_rotvec(np.stack([0.1 * np.sin(2 * np.pi * 2 * t), 0.3 + 0.05 * t, np.zeros_like(t)], 1))
+    walk = SkullTrajectory(translate, orient, 60.0)
+    half = scaled_about_steady_path(walk, 0.5)
+    acceleration = lambda w: np.diff(w.translate, 2, axis=0)  # noqa: E731
+    np.testing.assert_allclose(acceleration(half), 0.5 * acceleration(walk), atol=1e-9)
+    assert abs(half.translate[:, 0] - translate[:, 0]).max() < 1e-9  # the travel forward is steady: kept
+    turn = lambda w: quaternion.to_rotvec(w.orient)  # noqa: E731
+    np.testing.assert_allclose(np.ptp(turn(half), axis=0), 0.5 * np.ptp(turn(walk), axis=0), rtol=0.02, atol=1e-12)
+    same = scaled_about_steady_path(walk, 1.0)
+    np.testing.assert_allclose(same.translate, translate, atol=1e-9)
+    np.testing.assert_allclose(np.abs((same.orient * orient).sum(1)), 1.0, atol=1e-9)
+
+
 def test_the_session_is_held_apart_from_the_test_takes_and_a_transfer_take_is_theirs_crossed():
     """The session (the issue's protocol: ten held expressions on five platforms and under two
     real motions) holds none of the test takes' expression, frequency or mocap, nor their seeds;

@@ -1,0 +1,88 @@
+"""The test set's static offsets: how the part of the true dynamics that does not move grows with the motion.
+
+A truth-free removal or synthesis sees a take's mean offset only as part of the expression, so
+the static share (benchmarks/testset/score.py) is a floor under its figure on that take. This
+measures where the share comes from on the validation actors' MuJoCo tissues
+(benchmarks/README-testset.md), re-simulating two test recipes (1.5 s each, the lead-in
+before): the held funnel on the 8 Hz platform at several amplitudes (the test's is
+facedyn.motion.PLATFORM_AMPLITUDE_CM), once more at twice the time steps per frame (physics or
+integration?), and the run (CMU 131_02 at 1.6x) with its skull motion scaled about its steady
+path (testset.takes.scaled_about_steady_path). A linear tissue's mean offset would stay zero;
+a weakly nonlinear one's grows with the square of the motion; one that settles into another
+equilibrium jumps. One JSON record per case: the mean offset's RMS and largest vertex, the
+moving part's RMS (mm) and the static share.
+
+    python benchmarks/testset_static.py [--actors val_default_2101 val_default_2112] [--jobs 2] [--out benchmarks/results/testset_static.json]
+
+Validation actors only: a test actor's tissue is not to be probed (README-testset.md).
+"""
+from __future__ import annotations
+
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from harness import Recorder, parser
+from testset.actors import ACTORS, FPS, SUBSTEPS, test_takes
+from testset.generate import actor_rig, simulate_take
+from testset.score import static_share
+from testset.takes import TakeRecipe
+from testset.tissue import MujocoTissue, TissueParams
+
+from facedyn import motion
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+SECONDS = 1.5
+PLATFORM_SCALES = (0.5, 0.75, 1.0)
+RUN_SCALES = (0.5, 1.0)
+
+
+def cases(actor: str) -> list[tuple[str, TakeRecipe, int]]:
+    """(label, recipe, substeps): the platform's amplitudes, its time-step check, the run's sizes."""
+    spec = ACTORS[actor]
+    _, run, platform = (replace(recipe, duration_s=SECONDS) for recipe in test_takes(spec.take_seed))
+    steps = SUBSTEPS[spec.face]
+    amplitude = motion.PLATFORM_AMPLITUDE_CM
+    rows = [(f"8 Hz platform, {scale * amplitude:g} cm", replace(platform, motion_scale=scale), steps) for scale in PLATFORM_SCALES]
+    rows.append((f"8 Hz platform, {amplitude:g} cm, {2 * steps} steps a frame", platform, 2 * steps))
+    rows += [(f"run (131_02 at 1.6x), motion x{scale:g}", replace(run, motion_scale=scale), steps) for scale in RUN_SCALES]
+    return rows
+
+
+def measure(actor: str, label: str, recipe: TakeRecipe, substeps: int) -> dict:
+    """Simulate one case on the actor's own rig and tissue; its offsets' mean and moving part."""
+    spec = ACTORS[actor]
+    rig = actor_rig(spec, DATA)
+    tissue = MujocoTissue(rig.neutral, rig.topology.triangles(), rig.face_vertices, TissueParams.random(spec.tissue_seed),
+                          1.0 / (FPS * substeps))
+    start = time.perf_counter()
+    take = simulate_take(rig, tissue, recipe, DATA)
+    dynamics = np.asarray(take["dynamics"], np.float64)[:, take["face_vertices"]] * 10.0  # mm
+    mean = dynamics.mean(axis=0)
+    return {"case": label, "actor": actor, "motion": recipe.motion, "motion_scale": recipe.motion_scale, "substeps": substeps,
+            "seconds_simulated": SECONDS, "static_rms_mm": round(float(np.sqrt((mean ** 2).sum(-1).mean())), 4),
+            "static_max_mm": round(float(np.linalg.norm(mean, axis=-1).max()), 3),
+            "moving_rms_mm": round(float(np.sqrt(((dynamics - mean) ** 2).sum(-1).mean())), 4),
+            "static_share": round(static_share(take), 4), "cpu_seconds": round(time.perf_counter() - start, 1),
+            "obtained": {"test data": "MuJoCo flex tissue over the actor's own bone (benchmarks/testset), true dynamics",
+                         "split": "validation actor"}}
+
+
+def main() -> None:
+    arguments = parser(__doc__)
+    arguments.add_argument("--actors", nargs="+", default=["val_default_2101", "val_default_2112"],
+                           choices=sorted(a for a, s in ACTORS.items() if s.split == "validation"))
+    arguments.add_argument("--jobs", type=int, default=2, help="cases simulated at a time, one core each")
+    args = arguments.parse_args()
+    if not DATA.is_dir():
+        raise SystemExit(f"{DATA}: the shared data folder is needed (its CMU mocap and Live Link curves)")
+    with Recorder("testset_static", args) as emit, ProcessPoolExecutor(max(args.jobs, 1)) as pool:
+        for result in pool.map(measure, *zip(*[(actor, *case) for actor in args.actors for case in cases(actor)])):
+            emit(result)
+
+
+if __name__ == "__main__":
+    main()
