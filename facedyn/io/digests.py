@@ -13,6 +13,8 @@ a file written twice within one tick to the same size would keep its identity. S
 is kept only when the file had not changed for RACY_S before it was hashed and did not
 change while it was; a younger file is hashed again by the next command, as before. The
 KEEP most recently written digests stay; a cache that cannot be written only costs speed.
+Only POSIX systems keep digests: on Windows st_ctime is the file's creation time, which an
+in-place rewrite does not change.
 """
 from __future__ import annotations
 
@@ -27,6 +29,7 @@ from facedyn.io.files import user_cache_folder, write_atomically
 
 KEEP = 4096  # digests kept (about 16 MB of folder entries at most)
 RACY_S = 2.0  # a file must have been still this long before its digest is kept
+KEEPS = os.name == "posix"  # where st_ctime is the change time (see the module)
 
 
 def folder() -> Path:
@@ -36,6 +39,8 @@ def folder() -> Path:
 
 def digest(path: Path, compute: Callable[[Path], str]) -> str:
     """compute(path), or the digest kept for this very file when there is one."""
+    if not KEEPS:
+        return compute(path)
     before = os.stat(path)
     entry = folder() / _entry_name(path, before)
     kept = _read(entry)
