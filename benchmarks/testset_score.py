@@ -6,7 +6,10 @@
 Per test take: `usdfacedyn actor rig.usda`, then `import` + `stabilize --actor` of
 tracked.usdc (the console as a user runs it), and the figures (fraction of the true
 dynamics' RMS left, testset.score): do_nothing (1.0), moving_average (21 frames, on the
-stabilized take) and, with --removal, `usdfacedyn remove --model MODEL [--blend MODEL]`.
+stabilized take) and, with --removal, `usdfacedyn remove --model MODEL [--blend MODEL]`,
+with `removal_moving` beside it (testset.score.moving_left: the part of the truth that moves,
+each side less its mean over the take: the static share, which no truth-free method sees,
+set apart; transfers get `<figure>_moving` alike).
 With --no-actor the takes are stabilized without `--actor` (an actor with nothing: the
 take's own skull frame, which testset.score.frame_rotation turns into the actor's to score).
 MODEL may be a shipped model's name (`default`).
@@ -52,7 +55,7 @@ def commit() -> str:
 def main() -> None:
     from facedyn.performance import QUASISTATIC
     from facedyn.usd.take import read_layers, read_take_below
-    from testset.score import dynamics_rms_mm, fraction_left, frame_rotation, load_truth, moving_average_estimate, static_share
+    from testset.score import dynamics_rms_mm, fraction_left, frame_rotation, load_truth, moving_average_estimate, moving_left, static_share
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("actor", type=Path, help="an actor folder written by testset_generate.py")
@@ -112,7 +115,9 @@ def main() -> None:
                 usdfacedyn("remove", str(folder / "take.usda"), "-o", str(layer), "--attach", str(folder / "take.usda"),
                            "--model", str(args.removal), *(("--blend", str(args.blend)) if args.blend else ()))
                 reload_layers(layer, folder / "take.usda")
-                case["removal"] = round(fraction_left(read_layers([layer, folder / "take.usda"]).offsets @ turn.T, truth), 4)
+                removed = read_layers([layer, folder / "take.usda"]).offsets @ turn.T
+                case["removal"] = round(fraction_left(removed, truth), 4)
+                case["removal_moving"] = round(moving_left(removed, truth), 4)
             print(json.dumps(case), flush=True)
             run["takes"].append(case)
         for folder, recipe in transfers:
@@ -193,7 +198,7 @@ def score_transfer(recipe: dict, folder: Path, target: Path, source: Path, work:
     layers (the removal); the layers made go to `work`/<take>."""
     from facedyn.evaluation import residual_fraction
     from facedyn.usd.take import read_layers
-    from testset.score import dynamics_rms_mm, fraction_left, load_truth, static_share
+    from testset.score import dynamics_rms_mm, fraction_left, load_truth, moving_left, static_share
 
     expression_take, motion_take = recipe["sources"]
     truth = load_truth(folder, recipe["name"])
@@ -210,6 +215,7 @@ def score_transfer(recipe: dict, folder: Path, target: Path, source: Path, work:
         reload_layers(layer, target)
         offsets = read_layers([layer, target]).offsets
         case[name] = round(fraction_left(offsets, truth), 4)
+        case[f"{name}_moving"] = round(moving_left(offsets, truth), 4)
         case[f"{name}_rms_mm"] = round(residual_fraction(offsets, 0 * truth["dynamics"], truth["dynamics"], truth["face_vertices"])["residual_rms_cm"] * 10, 3)
     case["retarget_to_delta_transfer"] = round(case["retarget"] / case["delta_transfer"], 3)
     return case

@@ -34,6 +34,19 @@ def fraction_left(estimate: np.ndarray, truth: dict) -> float:
     return residual_fraction(estimate, dynamics, dynamics, truth["face_vertices"])["fraction"]
 
 
+def moving_left(estimate: np.ndarray, truth: dict) -> float:
+    """RMS of (estimate - true dynamics), each less its mean over the take, / RMS of the true
+    dynamics less its mean, over the scored vertices: how much of the part of the truth that
+    moves an estimate leaves, the static share (which no truth-free method sees) set apart."""
+    dynamics = np.asarray(truth["dynamics"], dtype=np.float64)[:, truth["face_vertices"]]
+    estimate = np.asarray(estimate, dtype=np.float64)
+    if estimate.shape != truth["dynamics"].shape:
+        raise ValueError(f"the estimate has shape {estimate.shape}, the truth {truth['dynamics'].shape} (frames, points, 3)")
+    residual = estimate[:, truth["face_vertices"]] - dynamics
+    moving = dynamics - dynamics.mean(axis=0)
+    return float(np.sqrt(np.sum((residual - residual.mean(axis=0)) ** 2) / np.sum(moving ** 2)))
+
+
 def frame_rotation(stabilized_points: np.ndarray, truth: dict) -> np.ndarray:
     """(3, 3) A: the rotation from a take's own skull frame (stabilized without --actor) to the
     actor's, one least-squares fit (Kabsch) of every frame's stabilized points to the true

@@ -148,6 +148,20 @@ def test_the_static_share_is_the_floor_of_any_estimate_that_averages_to_zero():
     assert static_share({"dynamics": ringing.astype(np.float32), "face_vertices": np.arange(6)}) < 1e-6
 
 
+def test_the_moving_part_left_sets_the_static_share_apart():
+    from testset.score import fraction_left, moving_left, static_share
+
+    rng = np.random.default_rng(3)
+    moving = rng.normal(size=(40, 6, 3))
+    moving -= moving.mean(axis=0)
+    truth = {"dynamics": moving + np.array([0.0, 0.5, 0.0]), "face_vertices": np.arange(1, 6)}
+    settled_elsewhere = moving.copy()  # every motion found, the offset it settled at missed
+    assert moving_left(settled_elsewhere, truth) == pytest.approx(0.0, abs=1e-12)
+    assert fraction_left(settled_elsewhere, truth) == pytest.approx(static_share(truth), rel=1e-9)
+    assert moving_left(np.zeros_like(moving), truth) == pytest.approx(1.0)
+    assert moving_left(moving * 0.5, truth) == pytest.approx(0.5, rel=1e-9)
+
+
 def test_a_faster_mocap_is_the_same_path_in_less_time():
     from testset.takes import LEAD_S, skull_trajectory
 
