@@ -1,7 +1,8 @@
 """Score removals on a test-set actor's test takes (benchmarks/README-testset.md); one JSON file per run.
 
     .venv/bin/python benchmarks/testset_score.py ACTOR_FOLDER [--removal MODEL [--blend MODEL]] [--work DIR] [--results DIR] [--no-actor]
-        [--synthesis MODEL [--transfer FOLDER] [--source-actor FOLDER --source-removal MODEL]] [--note "how MODEL was made"]
+        [--synthesis MODEL [--transfer FOLDER] [--source-actor FOLDER --source-removal MODEL [--source-synthesis MODEL]]]
+        [--note "how MODEL was made"]
 
 Per test take: `usdfacedyn actor rig.usda`, then `import` + `stabilize --actor` of
 tracked.usdc (the console as a user runs it), and the figures (fraction of the true
@@ -20,7 +21,9 @@ the issue's synthesis and retargeting cases: the expression take's quasistatic l
 the removal) `synthesize`d under the motion take's solved skull (`synthesis`), `retarget`ed
 from the motion take with the model (`retarget`) and by copying the motion take's removed
 offsets (`delta_transfer`), each against the transfer take's true dynamics; and
-`retarget_to_delta_transfer`, their ratio (issue 37: synthesis <= 0.3, the ratio <= 0.5).
+`retarget_to_delta_transfer`, their ratio (issue 37: synthesis <= 0.3, the ratio <= 0.5); and
+`retarget_residual` (`retarget --method residual`, the motion take's actor's synthesis model as
+`--source-model`: the actor's own, or --source-synthesis for a cross take) with its ratio.
 A cross take (`--takes cross --source-actor A`: the walking dialog under actor A's run) is
 scored the same way across actors, the issue's retargeting case: A's run (in --source-actor
 FOLDER, A's actor folder) is stabilized with A's actor and removed with A's removal
@@ -69,6 +72,8 @@ def main() -> None:
                         "(default: ACTOR_FOLDER)")
     parser.add_argument("--source-actor", type=Path, help="with cross takes: the folder of the actor whose run they move like")
     parser.add_argument("--source-removal", type=Path, help="with --source-actor: that actor's removal model (its offsets, for delta transfer)")
+    parser.add_argument("--source-synthesis", type=Path, help="with --source-actor: that actor's synthesis model (retarget --method "
+                        "residual's --source-model; without it cross takes get no retarget_residual)")
     parser.add_argument("--note", default="", help="how the removal model was made (the results page shows it beside the figures)")
     args = parser.parse_args()
     info_path = args.actor / "actor.json"
@@ -91,6 +96,7 @@ def main() -> None:
            "stabilized": "without --actor" if args.no_actor else "with --actor", "synthesis": args.synthesis and str(args.synthesis),
            "transfer": args.transfer and " ".join(map(str, args.transfer)), "source_actor": args.source_actor and str(args.source_actor),
            "source_removal": args.source_removal and str(args.source_removal),
+           "source_synthesis": args.source_synthesis and str(args.source_synthesis),
            **({"note": args.note} if args.note else {}), "takes": []}
     with tempfile.TemporaryDirectory(prefix="facedyn-testset-") as scratch:
         work = args.work or Path(scratch)
@@ -124,7 +130,8 @@ def main() -> None:
             expression_take, motion_take = recipe["sources"]
             source = (work / motion_take / "take.usda" if recipe["kind"] == "transfer"
                       else source_take(args.source_actor, motion_take.split("/")[1], work / "source", args.source_removal))
-            case = score_transfer(recipe, folder, work / expression_take / "take.usda", source, work, args.synthesis)
+            source_model = args.synthesis if recipe["kind"] == "transfer" else args.source_synthesis
+            case = score_transfer(recipe, folder, work / expression_take / "take.usda", source, work, args.synthesis, source_model)
             print(json.dumps(case), flush=True)
             run.setdefault("transfers", []).append(case)
     dialogs = [c for c in run["takes"] if c["take"].startswith("dialog")]
@@ -192,10 +199,11 @@ def source_take(source_actor: Path, take: str, work: Path, removal: Path) -> Pat
     return folder / "take.usda"
 
 
-def score_transfer(recipe: dict, folder: Path, target: Path, source: Path, work: Path, model: Path) -> dict:
+def score_transfer(recipe: dict, folder: Path, target: Path, source: Path, work: Path, model: Path, source_model: Path | None) -> dict:
     """One transfer take's synthesis, retargeting and delta transfer (the module's docstring);
     target, source: the expression's and the motion's take roots, holding their quasistatic
-    layers (the removal); the layers made go to `work`/<take>."""
+    layers (the removal); the layers made go to `work`/<take>. With source_model (the motion
+    take's actor's synthesis model), also `retarget --method residual` (retarget_residual)."""
     from facedyn.evaluation import residual_fraction
     from facedyn.usd.take import read_layers
     from testset.score import dynamics_rms_mm, fraction_left, load_truth, moving_left, static_share
@@ -207,6 +215,9 @@ def score_transfer(recipe: dict, folder: Path, target: Path, source: Path, work:
     commands = {"synthesis": ("synthesize", str(target), "--model", str(model), "--skull-motion", str(source)),
                 "retarget": ("retarget", str(target), "--source", str(source), "--model", str(model)),
                 "delta_transfer": ("retarget", str(target), "--source", str(source), "--method", "delta-transfer")}
+    if source_model is not None:
+        commands["retarget_residual"] = ("retarget", str(target), "--source", str(source), "--model", str(model), "--method", "residual",
+                                         "--source-model", str(source_model))
     case = {"take": recipe["name"], "expression_of": expression_take, "motion_of": motion_take, "frames": len(truth["dynamics"]),
             "dynamics_rms_mm": round(dynamics_rms_mm(truth), 3), "static_share": round(static_share(truth), 4)}
     for name, command in commands.items():
@@ -218,6 +229,8 @@ def score_transfer(recipe: dict, folder: Path, target: Path, source: Path, work:
         case[f"{name}_moving"] = round(moving_left(offsets, truth), 4)
         case[f"{name}_rms_mm"] = round(residual_fraction(offsets, 0 * truth["dynamics"], truth["dynamics"], truth["face_vertices"])["residual_rms_cm"] * 10, 3)
     case["retarget_to_delta_transfer"] = round(case["retarget"] / case["delta_transfer"], 3)
+    if "retarget_residual" in case:
+        case["retarget_residual_to_delta_transfer"] = round(case["retarget_residual"] / case["delta_transfer"], 3)
     return case
 
 

@@ -21,6 +21,9 @@ A's per-vertex offsets onto B. This module does the two array steps around that:
   its own landmarks (those of its model).
 - `delta_transfer` is the naive baseline: B's quasistatic skin plus A's offsets at the same
   vertex indices, optionally rotated into B's skull axes by G's rotation.
+- `residual_transfer` adds to B's synthesis what A's removal found beyond A's own model's
+  synthesis under A's skull (rotated like delta transfer's offsets): the part of A's
+  dynamics that a model reading the skull cannot say.
 """
 from __future__ import annotations
 
@@ -93,6 +96,20 @@ def delta_transfer(source_offsets, target_quasistatic, rotation=None) -> tuple[n
             raise ValueError(f"rotation must be a (3, 3) proper rotation matrix, got {rot.shape}")
         offsets = np.matmul(offsets, rot.T.astype(np.float32))
     return np.asarray(y, dtype=np.float32) + offsets, offsets
+
+
+def residual_transfer(points, offsets, source_offsets, source_synthesized, rotation=None) -> tuple[np.ndarray, np.ndarray]:
+    """(points, offsets) of B's synthesis (points, offsets: (F, N, 3) skull space) plus A's residual:
+    A's removed offsets less what A's own model synthesized for A's quasistatic take (both
+    (F, N, 3), A's skull frame), rotated into B's axes by `rotation` as in `delta_transfer`."""
+    removed = check_points(source_offsets, "source offsets")
+    own = check_points(source_synthesized, "source synthesized offsets")
+    if removed.shape != own.shape:
+        raise ValueError(f"source offsets {removed.shape} and source synthesized offsets {own.shape} must have the same shape")
+    _, residual = delta_transfer(removed - own, np.zeros_like(removed), rotation)
+    if residual.shape != np.shape(offsets) or np.shape(points) != np.shape(offsets):
+        raise ValueError(f"the residual {residual.shape} does not fit the synthesis' points {np.shape(points)} and offsets {np.shape(offsets)}")
+    return np.asarray(points, np.float32) + residual, np.asarray(offsets, np.float32) + residual
 
 
 def _start_transform(start) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ from facedyn.dynamics.features import skull_velocities
 from facedyn.dynamics.modelfile import DynamicsModel, ModelMismatch, load_model, save_model
 from facedyn.dynamics.network import Network, removal_spec
 from facedyn.dynamics.removal import remove_dynamics
-from facedyn.dynamics.root_motion import align_trajectory, delta_transfer, skull_correspondence
+from facedyn.dynamics.root_motion import align_trajectory, delta_transfer, residual_transfer, skull_correspondence
 from facedyn.dynamics.skull import to_world
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.stretch import UVNeighbourhoods
@@ -243,6 +243,26 @@ def test_delta_transfer_copies_offsets_exactly(corpus, rig):
         delta_transfer(source.offsets[:-1], target)
     with pytest.raises(ValueError, match="proper rotation"):
         delta_transfer(source.offsets, target, 2 * rot)
+
+
+def test_residual_transfer_adds_what_the_source_model_missed():
+    """B's synthesis plus A's removed offsets less A's own model's: zero residual leaves B's synthesis, a model that
+    says nothing makes it delta transfer, and the residual turns into B's axes as delta transfer's offsets do."""
+    rng = np.random.default_rng(5)
+    quasistatic, synthesized, removed, own = (rng.normal(size=(6, 9, 3)).astype(np.float32) for _ in range(4))
+    points = quasistatic + synthesized
+    same = residual_transfer(points, synthesized, removed, removed)
+    np.testing.assert_allclose(same[0], points, atol=1e-6)
+    np.testing.assert_allclose(same[1], synthesized, atol=1e-6)
+    silent_b = residual_transfer(quasistatic, np.zeros_like(synthesized), removed, np.zeros_like(removed))
+    np.testing.assert_allclose(silent_b[1], delta_transfer(removed, quasistatic)[1], atol=1e-6)
+    rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    _, turned = residual_transfer(points, synthesized, removed, own, rot)
+    np.testing.assert_allclose(turned, synthesized + (removed - own) @ rot.T.astype(np.float32), atol=1e-5)
+    with pytest.raises(ValueError, match="same shape"):
+        residual_transfer(points, synthesized, removed, own[:-1])
+    with pytest.raises(ValueError, match="does not fit"):
+        residual_transfer(points[:-1], synthesized[:-1], removed, own)
 
 
 @pytest.mark.slow  # simulates a 16-take corpus and trains H on it

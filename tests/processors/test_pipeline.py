@@ -93,6 +93,28 @@ def test_remove_then_synthesize_and_retarget(corpus, capsys):
     assert cli("retarget", root, "--source", other / "take.usda", "--model", models / "h.synthesis", "-o", take / "retargeted.usdc") == 0
     assert cli("remove", other / "take.usda", "--model", models / "f.removal", "-o", other / "quasistatic.usdc", "--attach", other / "take.usda") == 0
     assert cli("retarget", root, "--source", other / "take.usda", "--method", "delta-transfer", "-o", take / "delta.usdc") == 0
+    # B's synthesis plus what A's removal found beyond A's own synthesis (one actor: one model)
+    assert cli("retarget", root, "--source", other / "take.usda", "--model", models / "h.synthesis", "--method", "residual",
+               "-o", take / "residual.usdc") == 0
+    from facedyn.dynamics.modelfile import load_model
+    from facedyn.dynamics.synthesis import synthesize_dynamics
+    from facedyn.usd.take import read_layers
+
+    retargeted = read_layers([take / "retargeted.usdc", root]).offsets
+    residual = read_layers([take / "residual.usdc", root]).offsets
+    source, _ = read_take_below(other / "take.usda", "synthesized")  # A's quasistatic take, with its removed offsets
+    _, own = synthesize_dynamics(source.points, *source.skull(), source.fps, load_model(models / "h.synthesis"))
+    frames = len(retargeted)
+    expected = retargeted + (source.offsets - own)[:frames]  # one actor: the same skull axes
+    face = np.flatnonzero(default_face(12).rigid_weights < 1)
+    assert np.abs(residual[:, face] - expected[:, face]).max() < 2e-3 * max(np.abs(expected).max(), 1e-6) + 1e-4
+    assert cli("retarget", root, "--source", other / "take.usda", "--model", models / "h.synthesis", "--source-model",
+               models / "h.synthesis", "-o", take / "x.usdc") == 2  # --source-model is only the residual's
+    assert "only --method residual" in capsys.readouterr().err
+    assert cli("retarget", root, "--source", other / "take.usda", "--model", models / "h.synthesis", "--method", "residual",
+               "--source-model", models / "f.removal", "-o", take / "x.usdc") == 2
+    assert "actor A's own synthesis model" in capsys.readouterr().err
+    assert not (take / "x.usdc").exists()
     assert cli("validate", root) == 0
 
 
@@ -441,7 +463,8 @@ def test_retarget_streams_in_chunks_that_equal_the_whole_take(corpus, tmp_path, 
         if not (take.parent / "quasistatic.usdc").exists():
             assert cli("stabilize", take, "-o", take.parent / "stabilized.usdc", "--attach", take) == 0
             assert cli("remove", take, "--model", models / "f.removal", "-o", take.parent / "quasistatic.usdc", "--attach", take) == 0
-    methods = {"synthesis": ("--model", models / "h.synthesis"), "delta-transfer": ("--method", "delta-transfer")}
+    methods = {"synthesis": ("--model", models / "h.synthesis"), "delta-transfer": ("--method", "delta-transfer"),
+               "residual": ("--model", models / "h.synthesis", "--method", "residual")}
     for label, chunk in (("whole", model_steps.CHUNK_FRAMES), ("chunked", 16)):  # one chunk for this 1 s take, then several
         monkeypatch.setattr(model_steps, "CHUNK_FRAMES", chunk)
         for name, flags in methods.items():
