@@ -89,27 +89,33 @@ def delta_transfer(source_offsets, target_quasistatic, rotation=None) -> tuple[n
     y = check_points(target_quasistatic, "target quasistatic")
     if d.shape != y.shape:
         raise ValueError(f"source offsets {d.shape} and target quasistatic {y.shape} must have the same frames and vertices")
-    offsets = np.array(d, dtype=np.float32)
-    if rotation is not None:
-        rot = np.asarray(rotation, dtype=np.float64)
-        if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
-            raise ValueError(f"rotation must be a (3, 3) proper rotation matrix, got {rot.shape}")
-        offsets = np.matmul(offsets, rot.T.astype(np.float32))
+    offsets = _turned(d, rotation)
     return np.asarray(y, dtype=np.float32) + offsets, offsets
 
 
 def residual_transfer(points, offsets, source_offsets, source_synthesized, rotation=None) -> tuple[np.ndarray, np.ndarray]:
     """(points, offsets) of B's synthesis (points, offsets: (F, N, 3) skull space) plus A's residual:
     A's removed offsets less what A's own model synthesized for A's quasistatic take (both
-    (F, N, 3), A's skull frame), rotated into B's axes by `rotation` as in `delta_transfer`."""
+    (F, N, 3), A's skull frame), turned into B's axes by `rotation` as in `delta_transfer`."""
     removed = check_points(source_offsets, "source offsets")
     own = check_points(source_synthesized, "source synthesized offsets")
     if removed.shape != own.shape:
         raise ValueError(f"source offsets {removed.shape} and source synthesized offsets {own.shape} must have the same shape")
-    _, residual = delta_transfer(removed - own, np.zeros_like(removed), rotation)
+    residual = _turned(removed - own, rotation)
     if residual.shape != np.shape(offsets) or np.shape(points) != np.shape(offsets):
         raise ValueError(f"the residual {residual.shape} does not fit the synthesis' points {np.shape(points)} and offsets {np.shape(offsets)}")
     return np.asarray(points, np.float32) + residual, np.asarray(offsets, np.float32) + residual
+
+
+def _turned(offsets: np.ndarray, rotation) -> np.ndarray:
+    """(F, N, 3) float32 offsets turned by a (3, 3) proper rotation (None: as they are)."""
+    turned = np.array(offsets, dtype=np.float32)
+    if rotation is None:
+        return turned
+    rot = np.asarray(rotation, dtype=np.float64)
+    if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-6) or np.linalg.det(rot) < 0:
+        raise ValueError(f"rotation must be a (3, 3) proper rotation matrix, got {rot.shape}")
+    return np.matmul(turned, rot.T.astype(np.float32))
 
 
 def _start_transform(start) -> tuple[np.ndarray, np.ndarray]:

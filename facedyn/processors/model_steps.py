@@ -186,8 +186,9 @@ def synthesized_chunk(reader, window, points, offsets, translate, orient, stats)
                         skull_orient=orient[window.start:window.stop])
 
 
-def synthesized_layer(frames, landmarks, source, model_path, role_name, summary) -> LayerOutput:
-    """The static part of a synthesized layer (its per-frame values come as arrays or chunks)."""
+def synthesized_layer(frames, landmarks, source, model_paths, role_name, summary) -> LayerOutput:
+    """The static part of a synthesized layer (its per-frame values come as arrays or chunks); model_paths:
+    the model files it applied (inputs of the layer)."""
     from facedyn.usd import schema
     from facedyn.usd.layers import LayerContent
 
@@ -195,7 +196,7 @@ def synthesized_layer(frames, landmarks, source, model_path, role_name, summary)
         frames=frames, mesh_path=source.mesh_path, skull_path=source.skull_path, face=schema.FaceAttributes(role=role_name),
         skull=schema.SkullAttributes(solver="resampled", landmarks=landmarks),
     )
-    inputs = model_inputs(source, model_path) if model_path else list(source.inputs)
+    inputs = model_inputs(source, *(path for path in model_paths if path is not None))
     return LayerOutput(layer=layer, timing=source.timing, inputs=inputs, summary=summary)
 
 

@@ -23,8 +23,8 @@ import numpy as np
 from facedyn.errors import UsageError
 from facedyn.performance import BACKENDS, QUASISTATIC, RETARGETED, SYNTHESIZED
 from facedyn.processors.base import INFERENCE_DEVICE, LayerOutput, Parameter, Plan, Processor, Reads, Request, Writes, single_input
-from facedyn.processors.model_steps import (SYNTHESIZES, OffsetStats, check_skull_frame, model_inputs, model_windows, reader_with_model,
-                                           synthesized_chunk, synthesized_layer)
+from facedyn.processors.model_steps import (SYNTHESIZES, OffsetStats, check_skull_frame, model_windows, reader_with_model, synthesized_chunk,
+                                           synthesized_layer)
 from facedyn.progress import Progress
 
 
@@ -78,7 +78,7 @@ class RetargetProcessor(Processor):
         if method != "synthesis" and a.head.offsets is None:
             raise TakeError(f"{params['source']}: {method} needs actor A's dynamics offsets (its quasistatic layer: "
                             "`usdfacedyn remove` it first)")
-        source_model = source_model_of(params, a) if method == "residual" else None
+        source_model = source_model_of(params, a, model) if method == "residual" else None
         description = {"target_take": str(request.inputs[0]), "source_take": str(params["source"]),
                        "frames": reader.frame_count, "method": method}
         return Plan(description, (reader, model, a, source_model, params))
@@ -122,26 +122,24 @@ class RetargetProcessor(Processor):
             progress.finish()
 
         stats.summary.update({"source": str(params["source"]), "method": method})
-        output = synthesized_layer(reader.time_codes, reader.head.landmarks, reader.source, params["model"], self.writes.role,
-                                   stats.summary)
-        if source_model is not None and params["source_model"] is not None:
-            output.inputs = model_inputs(reader.source, params["model"], params["source_model"])
+        output = synthesized_layer(reader.time_codes, reader.head.landmarks, reader.source, [params["model"], params["source_model"]],
+                                   self.writes.role, stats.summary)
         output.inputs = list(output.inputs) + read_elsewhere(a.source.inputs)  # actor A's layers, by content
         output.chunks = chunks()
         return output
 
 
-def source_model_of(params: dict, a):
-    """Actor A's synthesis model (or linear response) for --method residual: --source-model, else --model; it must
-    fit A's take (topology, frame rate, skull frame) as B's model fits B's."""
+def source_model_of(params: dict, a, model):
+    """Actor A's synthesis model (or linear response) for --method residual: --source-model, else B's `model` (one
+    actor: A's take has B's topology and frame rate, checked); it must fit A's take as B's model fits B's."""
     from facedyn.dynamics.modelfile import load_model
 
-    path = params["source_model"] if params["source_model"] is not None else params["model"]
-    flag = "--source-model" if params["source_model"] is not None else "--model (used for actor A: give --source-model)"
-    model = load_model(path, topology=a.head.topology, fps=a.fps)
-    if model.kind not in SYNTHESIZES:
-        raise UsageError(f"{flag} {path}: a {model.kind} model; actor A's own synthesis model or linear response is needed")
-    check_skull_frame(params["source"], a.head, path, model)
+    path = params["source_model"]
+    if path is not None:
+        model = load_model(path, topology=a.head.topology, fps=a.fps)
+        if model.kind not in SYNTHESIZES:
+            raise UsageError(f"--source-model {path}: a {model.kind} model; actor A's own synthesis model or linear response is needed")
+    check_skull_frame(params["source"], a.head, path or params["model"], model)
     return model
 
 

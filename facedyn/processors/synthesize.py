@@ -75,7 +75,7 @@ class SynthesizeProcessor(Processor):
             progress.finish()
 
         stats.summary["skull_motion"] = described
-        output = synthesized_layer(reader.time_codes, reader.head.landmarks, reader.source, params["model"], self.writes.role,
+        output = synthesized_layer(reader.time_codes, reader.head.landmarks, reader.source, [params["model"]], self.writes.role,
                                    stats.summary)
         output.inputs = list(output.inputs) + motion_inputs
         output.chunks = chunks()
