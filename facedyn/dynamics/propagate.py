@@ -100,16 +100,18 @@ class Propagator:
     def apply_into(self, offsets: np.ndarray, out: np.ndarray) -> None:
         """Write P d for (F, S, 3) float32 offsets into a preallocated (F, N, 3) float32 array.
 
-        Frames go through in chunks: one (N, S) x (S, chunk * 3) product each (BLAS),
-        whose result is small enough to be reordered to (chunk, N, 3) in cache.
+        Frames go through in chunks: one (chunk * 3, S) x (S, N) product each (BLAS, P read
+        transposed in place), whose rows are a frame's x, y and z over every vertex, so each
+        frame is reordered to (N, 3) from three contiguous rows rather than from columns a
+        chunk apart (a third less time at 11,248 points).
         """
         n, s = self.matrix.shape
         d = np.asarray(offsets, dtype=np.float32)
         for a in range(0, len(d), _APPLY_CHUNK):
             chunk = d[a: a + _APPLY_CHUNK]
             f = len(chunk)
-            product = self.matrix @ chunk.transpose(1, 0, 2).reshape(s, f * 3)
-            out[a: a + f] = product.reshape(n, f, 3).transpose(1, 0, 2)
+            product = chunk.transpose(0, 2, 1).reshape(f * 3, s) @ self.matrix.T
+            out[a: a + f] = product.reshape(f, 3, n).transpose(0, 2, 1)
 
     def residual(self, offsets, backend: str = "auto") -> np.ndarray:
         """(F,) sqrt(sum_i |(L u)_i|^2 / m_i) of (F, N, 3) offsets: the energy minimized."""
