@@ -67,6 +67,10 @@ SECTIONS = (
     ("testset_static", "The test set's static offsets",
      "How the part of the true dynamics that does not move over a take grows with the motion on the validation actors' "
      "MuJoCo tissues: a floor under any truth-free method's figure on that take (benchmarks/README-testset.md)."),
+    ("testset_ceiling", "The linear response's ceiling on the test set's run",
+     "What an actor's linear response, fitted as calibrate fits it but on the truth (true skull; the session's true "
+     "dynamics, the run itself at half size, or in sample), leaves of the run's moving dynamics on the validation actors' "
+     "MuJoCo tissues: whether any fit of that model could reach issue 37's synthesis target there (benchmarks/README-testset.md)."),
     ("bench_motion_spectrum", "Skull motion spectra", "Where the skull's acceleration power lies, 6-15 Hz, procedural gaits beside real mocap."),
     ("tests", "The test suite", "The time of the README's test command."),
     ("testset", "Test set",
