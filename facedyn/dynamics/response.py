@@ -110,6 +110,9 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
     if not described:
         raise ValueError("a linear response needs at least one take")
     sums = _Sums.total(session)
+    if not np.any(sums.squares > 0):
+        raise ValueError(f"the takes {[d['name'] for d in described]} hold no skull motion after their first {settle_s:g} s: a "
+                         "linear response is fitted on held expressions under motion (platforms, walks, jumps)")
     candidates = RIDGES if ridge is None and len(session) > 1 else (RIDGE if ridge is None else float(ridge),)
     left_by_ridge, fits = {}, {}
     for candidate in candidates:
@@ -341,6 +344,8 @@ def _modal_fit(gram: np.ndarray, moments: np.ndarray, full: np.ndarray, penalty:
 
     for _ in range(ALTERNATIONS):
         maps = maps_for(kernels)
+        if not np.any(maps):  # targets the motion does not move at all: nothing for the kernels to fit
+            break
         overlaps = np.einsum("rco,sdo->rscd", maps, maps, optimize=True)
         lhs = np.einsum("kcld,rscd->rksl", g, overlaps, optimize=True).reshape(rank * width, rank * width)
         lhs += penalty * np.kron(np.einsum("rscc->rs", overlaps), np.eye(width))  # the maps' share of |W|^2

@@ -148,6 +148,18 @@ def test_refusals_name_the_problem(session, template):
         fit_linear_response(template, [TrainingSequence("short", short.captured[:60], FPS, short.skull_translate[:60], short.skull_orient[:60])])
     with pytest.raises(ValueError, match="at least one take"):
         fit_linear_response(template, [])
+    still = TrainingSequence("still", short.captured, FPS, np.repeat(short.skull_translate[:1], len(short.captured), axis=0),
+                             np.repeat(short.skull_orient[:1], len(short.captured), axis=0))
+    with pytest.raises(ValueError, match=r"takes \['still'\] hold no skull motion"):  # was numpy's "Singular matrix"
+        fit_linear_response(template, [still])
+
+
+def test_skin_the_motion_does_not_move_gives_a_zero_response(session, template):
+    """Held expressions that the skull's motion leaves exactly still: a response of zero, not a singular solve."""
+    takes = [TrainingSequence(s.spec.name, np.repeat(s.captured[:1], len(s.captured), axis=0), FPS, s.skull_translate, s.skull_orient)
+             for s in session[:2]]
+    model = fit_linear_response(template, takes, ridge=0.1)
+    assert not np.any(model.weights.layers()[0][0])
 
 
 @pytest.mark.slow  # simulates a calibration session of 3 s takes and fits the response on it
