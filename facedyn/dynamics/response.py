@@ -78,6 +78,7 @@ from facedyn.dynamics.skull import check_points, check_transforms, skull_space
 from facedyn.dynamics.skull_motion import SkullMotionInput
 from facedyn.dynamics.spikes import replace_spikes
 from facedyn.dynamics.training_sequence import TrainingSequence
+from facedyn.errors import FacedynError
 from facedyn.geometry import quaternion
 
 SETTLE_S = 0.4  # the simulated sessions ease their expression in over 0.3 s
@@ -111,7 +112,7 @@ def fit_linear_response(model: DynamicsModel, takes: Iterable, *, settle_s: floa
         raise ValueError("a linear response needs at least one take")
     sums = _Sums.total(session)
     if not np.any(sums.squares > 0):
-        raise ValueError(f"the takes {[d['name'] for d in described]} hold no skull motion after their first {settle_s:g} s: a "
+        raise FacedynError(f"the takes {[d['name'] for d in described]} hold no skull motion after their first {settle_s:g} s: a "
                          "linear response is fitted on held expressions under motion (platforms, walks, jumps)")
     candidates = RIDGES if ridge is None and len(session) > 1 else (RIDGE if ridge is None else float(ridge),)
     left_by_ridge, fits = {}, {}
