@@ -18,9 +18,10 @@ skull, each case fitted as calibrate fits it (`fit_linear_response`):
   holds of that run at all.
 
 The lone runs take the session truth's ridge (one take has no other to choose by). Each is
-scored on the run at full size (CMU 131_02 at 1.6x, the test's dialog): the fraction of the true
-dynamics' moving part (each side less its mean over the take: the static share set apart,
-testset.score.moving_left) that the response's skull-driven offsets leave, at its samples.
+scored on the run at full size (CMU 131_02 at 1.6x, the test's dialog) as `synthesize` answers
+it from the run's true quasistatic skin and true skull (facedyn.dynamics.synthesis): the
+fraction of the true dynamics' moving part (each side less its mean over the take: the static
+share set apart, testset.score.moving_left) left on the face vertices.
 If the run's own truth, fitted in sample, leaves more than the target, no fit of a linear
 response reaches it there: the tissue answers the run's larger motion nonlinearly.
 
@@ -42,11 +43,12 @@ import numpy as np
 from harness import Recorder, parser
 from testset.actors import ACTORS, FPS, SUBSTEPS, test_takes
 from testset.generate import actor_rig, simulate_take
-from testset.score import load_truth
+from testset.score import load_truth, moving_left
 from testset.tissue import MujocoTissue, TissueParams
 
-from facedyn.dynamics import response
 from facedyn.dynamics.face import FaceSetup
+from facedyn.dynamics.response import fit_linear_response, response_template
+from facedyn.dynamics.synthesis import synthesize_dynamics
 from facedyn.dynamics.training_sequence import TrainingSequence
 from facedyn.processors.calibrate import F_SAMPLES
 
@@ -66,19 +68,11 @@ def as_take(name: str, truth: dict, points: np.ndarray) -> TrainingSequence:
     return TrainingSequence(name, points, float(truth["fps"]), truth["skull_translate"], truth["skull_orient"], "skull")
 
 
-def moving_left_at_samples(predicted: np.ndarray, truth: dict, samples: np.ndarray) -> float:
-    """testset.score.moving_left at the response's samples: (F, S, 3) predicted offsets."""
-    true = np.asarray(truth["dynamics"], np.float64)[:, samples]
-    residual = np.asarray(predicted, np.float64) - true
-    moving = true - true.mean(axis=0)
-    return float(np.sqrt(np.sum((residual - residual.mean(axis=0)) ** 2) / np.sum(moving ** 2)))
-
-
-def skull_driven(model, truth: dict) -> np.ndarray:
-    """(F, S, 3) the response's skull-driven offsets (its stiffening included) under a take's true skull."""
-    features = model.skull_input.features(truth["skull_translate"], truth["skull_orient"], model.face.landmarks, float(truth["fps"]))
-    kernel = response._kernel(model) if response._hardening(model) else None
-    return response._skull_driven(model, features, kernel)
+def synthesized(model, truth: dict) -> np.ndarray:
+    """(F, N, 3) what `synthesize` makes of a take's true quasistatic skin under its true skull."""
+    _, offsets = synthesize_dynamics(truth["quasistatic"], truth["skull_translate"], truth["skull_orient"], float(truth["fps"]), model,
+                                     "numpy")
+    return offsets
 
 
 def actor_name(folder: Path) -> str:
@@ -101,7 +95,7 @@ def main() -> None:
     rig = actor_rig(spec, DATA)
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices,
                            sample_count=F_SAMPLES)
-    template = response.response_template(face, FPS)
+    template = response_template(face, FPS)
     session = session_truths(args.session or args.actor)
     neutral = np.asarray(rig.neutral, np.float64)
 
@@ -112,7 +106,7 @@ def main() -> None:
     runs = {scale: simulate_take(rig, tissue, replace(run, motion_scale=scale), DATA) for scale in (HALF, 1.0)}
     simulated = time.perf_counter() - started
     scored = runs[1.0]
-    dynamics = np.asarray(scored["dynamics"], np.float64)[:, face.samples]
+    dynamics = np.asarray(scored["dynamics"], np.float64)[:, scored["face_vertices"]]
 
     def on_truth(label: str, truth: dict) -> TrainingSequence:
         return as_take(label, truth, neutral + truth["dynamics"])
@@ -128,18 +122,18 @@ def main() -> None:
     with Recorder("testset_ceiling", args) as emit:
         for label, takes, chooses in cases:
             began = time.perf_counter()
-            model = response.fit_linear_response(template, takes, ridge=None if chooses else session_ridge)
+            model = fit_linear_response(template, takes, ridge=None if chooses else session_ridge)
             record = model.info["calibration"]
             if label == "session truth":
                 session_ridge = record["ridge"]
             emit({"case": f"{name}: fitted on {label}", "actor": name, "fitted_on": label, "takes": len(takes),
                   "ridge": record["ridge"], "hardening": round(record["hardening"], 3),
-                  "run_moving_left": round(moving_left_at_samples(skull_driven(model, scored), scored, face.samples), 4),
+                  "run_moving_left": round(moving_left(synthesized(model, scored), scored), 4),
                   "run_moving_rms_mm": round(float(np.sqrt(((dynamics - dynamics.mean(0)) ** 2).sum(-1).mean()) * 10), 3),
                   "fit_seconds": round(time.perf_counter() - began, 1), "simulation_seconds": round(simulated, 1),
                   "obtained": {"skull": "true", "rest": "given (the actor's rig)",
-                               "scored": "the run (CMU 131_02 at 1.6x, the test's dialog) at full size, the response's samples, "
-                                         "moving part (static share set apart)",
+                               "scored": "synthesize of the run's true quasistatic skin under its true skull (CMU 131_02 at "
+                                         "1.6x, the test's dialog, full size), face vertices, moving part (static share set apart)",
                                "test data": "MuJoCo flex tissue over the actor's own bone (benchmarks/testset), true dynamics",
                                "split": "validation actor", "model": "facedyn.dynamics.response.fit_linear_response"}})
 
