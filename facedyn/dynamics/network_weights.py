@@ -9,13 +9,19 @@ only where something trains the network or runs it on a GPU (facedyn.dynamics.in
 says where a model runs).
 
 The forward pass is the torch module's, in float32: inputs standardized per feature, ReLU
-between the layers, outputs scaled back by one common scale and a per-coordinate mean.
+between the layers, outputs scaled back by one common scale and a per-coordinate mean. It
+takes BLOCK_ROWS rows through all the layers at a time: a thousand frames of F's samples
+are 344,000 rows, whose hidden layer (176 MB) would otherwise go out to memory and back at
+every step; blocked, F's forward pass on them takes a quarter less time (0.215 -> 0.163 s on
+two cores).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from facedyn.dynamics.netspec import NetworkSpec
+
+BLOCK_ROWS = 4096  # rows taken through every layer together: their hidden layers stay in the CPU's cache
 
 
 class NetworkWeights:
@@ -59,10 +65,16 @@ class NetworkWeights:
         if x.ndim != 2 or x.shape[1] != self.spec.inputs:
             raise ValueError(f"the network takes (rows, {self.spec.inputs}) inputs, got {x.shape}")
         (weight, bias), *rest = self.layers()
+        rest = _transposed(rest)
         scaled = weight / self.state["input_std"]
-        h = x @ scaled.T
-        h += bias - scaled @ self.state["input_mean"]
-        return self._rest(h, rest)
+        first = np.ascontiguousarray(scaled.T)
+        shift = bias - scaled @ self.state["input_mean"]
+        out = np.empty((len(x), self.spec.outputs), np.float32)
+        for a in range(0, len(x), BLOCK_ROWS):
+            h = x[a:a + BLOCK_ROWS] @ first
+            h += shift
+            out[a:a + BLOCK_ROWS] = self._rest(h, rest)
+        return self._scaled_back(out)
 
     def forward_split(self, shared: np.ndarray, items: np.ndarray) -> np.ndarray:
         """(F, I, outputs) float32: forward(concat(shared[f], items[f, i])) for all f, i, without the concatenation.
@@ -77,23 +89,40 @@ class NetworkWeights:
         if ds + items.shape[-1] != self.spec.inputs:
             raise ValueError(f"inputs of sizes {ds} + {items.shape[-1]} do not add up to the network's {self.spec.inputs}")
         (weight, bias), *rest = self.layers()
+        rest = _transposed(rest)
         scaled = weight / self.state["input_std"]
         per_frame = shared @ scaled[:, :ds].T
         per_frame += bias - scaled @ self.state["input_mean"]
+        first = np.ascontiguousarray(scaled[:, ds:].T)
         frames, count = items.shape[:2]
-        h = items.reshape(frames * count, -1) @ scaled[:, ds:].T
-        h.reshape(frames, count, -1)[:] += per_frame[:, None, :]
-        return self._rest(h, rest).reshape(frames, count, -1)
+        out = np.empty((frames, count, self.spec.outputs), np.float32)
+        step = max(1, BLOCK_ROWS // max(count, 1))  # whole frames per block
+        for a in range(0, frames, step):
+            block = items[a:a + step]
+            h = block.reshape(-1, block.shape[-1]) @ first
+            h.reshape(len(block), count, -1)[:] += per_frame[a:a + step, None, :]
+            out[a:a + step] = self._rest(h, rest).reshape(len(block), count, -1)
+        return self._scaled_back(out)
 
-    def _rest(self, h: np.ndarray, rest: list) -> np.ndarray:
-        """The layers after the first (ReLU before each) and the output scaling, in place where it can."""
-        for weight, bias in rest:
+    @staticmethod
+    def _rest(h: np.ndarray, rest: list) -> np.ndarray:
+        """A block's layers after the first (ReLU before each), in place where it can; rest: (weight.T, bias)."""
+        for weight_t, bias in rest:
             np.maximum(h, 0.0, out=h)
-            h = h @ weight.T
+            h = h @ weight_t
             h += bias
-        h *= self.state["output_scale"]
-        h += self.state["output_mean"]
         return h
+
+    def _scaled_back(self, out: np.ndarray) -> np.ndarray:
+        """The outputs in their units: times the common scale, plus the per-coordinate mean (in place)."""
+        out *= self.state["output_scale"]
+        out += self.state["output_mean"]
+        return out
+
+
+def _transposed(layers: list) -> list:
+    """(weight.T as a contiguous array, bias) of each layer: the layout a block's product reads fastest."""
+    return [(np.ascontiguousarray(weight.T), bias) for weight, bias in layers]
 
 
 def normalization_state(input_mean, input_std, output_mean, output_scale: float) -> dict[str, np.ndarray]:
