@@ -71,6 +71,10 @@ SECTIONS = (
      "What an actor's linear response, fitted as calibrate fits it but on the truth (true skull; the session's true "
      "dynamics, the run itself at half size, or in sample), leaves of the run's moving dynamics on the validation actors' "
      "MuJoCo tissues: whether any fit of that model could reach issue 37's synthesis target there (benchmarks/README-testset.md)."),
+    ("testset_blend_ceiling", "Calibrate's choice beside the best blend of its two models",
+     "On the validation actors' test takes: the family's F, the actor's linear response, their mean and calibrate's "
+     "truth-free choice, beside the blend of F and the response weighed per band with the take's own truth (an upper bound "
+     "for any choice of weights): whether the choice or the two models hold removal back (benchmarks/README-testset.md)."),
     ("bench_motion_spectrum", "Skull motion spectra", "Where the skull's acceleration power lies, 6-15 Hz, procedural gaits beside real mocap."),
     ("tests", "The test suite", "The time of the README's test command."),
     ("testset", "Test set",

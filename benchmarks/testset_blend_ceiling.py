@@ -15,10 +15,10 @@ Figures: the fraction of the true dynamics' moving part left on the face vertice
 no truth-free method sees, set apart), solved skull (the takes stabilized with `--actor` by
 testset_score.py), plain captures with tracker noise.
 
-    python benchmarks/testset_blend_ceiling.py ACTOR_FOLDER --work DIR --calibration DIR [--out FILE]
+    python benchmarks/testset_blend_ceiling.py --actor ACTOR_FOLDER WORK CALIBRATION [--actor ...] [--out FILE]
 
-ACTOR_FOLDER: a validation actor (testset_generate.py); --work: testset_score.py's --work
-folder for it (its takes imported and stabilized); --calibration: the actor's `usdfacedyn
+ACTOR_FOLDER: a validation actor (testset_generate.py); WORK: testset_score.py's --work
+folder for it (its takes imported and stabilized); CALIBRATION: the actor's `usdfacedyn
 calibrate` folder (family.removal, synthesis.response and the chosen removal). Validation
 actors only: a test actor's truth is not used to weigh anything.
 """
@@ -39,7 +39,7 @@ from facedyn.dynamics.bands import EDGES_HZ, split
 from facedyn.usd.take import read_layers
 
 TAKES = ("dialog_walk", "dialog_run", "platform_8hz")
-MEMBERS = {"family F": "family.removal", "linear response": "synthesis.response"}
+MEMBERS = {"family_F": "family.removal", "response": "synthesis.response"}
 
 
 def removed_offsets(take_root: Path, model: Path, scratch: Path) -> np.ndarray:
@@ -82,34 +82,32 @@ def chosen_removal(folder: Path) -> tuple[Path, str]:
 
 def main() -> None:
     arguments = parser(__doc__)
-    arguments.add_argument("actor", type=Path, help="a validation actor's folder (testset_generate.py)")
-    arguments.add_argument("--work", type=Path, required=True, help="testset_score.py's --work folder for the actor")
-    arguments.add_argument("--calibration", type=Path, required=True, help="the actor's usdfacedyn calibrate folder")
+    arguments.add_argument("--actor", nargs=3, action="append", type=Path, required=True, metavar=("ACTOR", "WORK", "CALIBRATION"),
+                           help="a validation actor's folder, testset_score.py's --work folder for it and its calibrate folder")
     args = arguments.parse_args()
-    name = actor_name(args.actor)
-    chosen, made = chosen_removal(args.calibration)
     with Recorder("testset_blend_ceiling", args) as emit, tempfile.TemporaryDirectory(prefix="facedyn-blend-ceiling-") as scratch:
-        for take in TAKES:
-            root = args.work / take / "take.usda"
-            if not root.is_file():
-                raise SystemExit(f"{root}: no stabilized take (run testset_score.py {args.actor} --work {args.work} first)")
-            truth = load_truth(args.actor, take)
-            fps = float(truth["fps"])
-            members = [removed_offsets(root, args.calibration / file, Path(scratch)) for file in MEMBERS.values()]
-            blend, weights = truth_best_bands(members, truth, fps)
-            figures = {label: moving_left(offsets, truth) for label, offsets in zip(MEMBERS, members)}
-            figures["mean of the two"] = moving_left(sum(members) / 2, truth)
-            figures[f"calibrate's choice ({chosen.name})"] = moving_left(removed_offsets(root, chosen, Path(scratch)), truth)
-            emit({"case": f"{name}: {take}", "actor": name, "take": take,
-                  "moving_left": {label: round(value, 4) for label, value in figures.items()},
-                  "truth_best_bands_moving_left": round(moving_left(blend, truth), 4), "truth_best_band_weights": weights,
-                  "band_edges_hz": list(EDGES_HZ), "chosen": chosen.name,
-                  "upper_bound": "truth_best_bands_moving_left: weights chosen per take with its truth",
-                  "obtained": {"skull": "solved (stabilize --actor, testset_score.py)", "rest": "given (the actor's rig)",
-                               "scored": "face vertices, moving part (static share set apart), usdfacedyn remove as a user runs it",
-                               "test data": "MuJoCo flex tissue over the actor's own bone (benchmarks/testset), plain captures "
-                                            "with tracker noise", "split": "validation actor",
-                               "models": made}})
+        for actor, work, folder in args.actor:
+            name = actor_name(actor)
+            chosen, made = chosen_removal(folder)
+            for take in TAKES:
+                root = work / take / "take.usda"
+                if not root.is_file():
+                    raise SystemExit(f"{root}: no stabilized take (run testset_score.py {actor} --work {work} first)")
+                truth = load_truth(actor, take)
+                members = [removed_offsets(root, folder / file, Path(scratch)) for file in MEMBERS.values()]
+                blend, weights = truth_best_bands(members, truth, float(truth["fps"]))
+                figures = {f"{label}_moving_left": moving_left(offsets, truth) for label, offsets in zip(MEMBERS, members)}
+                figures["mean_moving_left"] = moving_left(sum(members) / 2, truth)
+                figures["chosen_moving_left"] = moving_left(removed_offsets(root, chosen, Path(scratch)), truth)
+                emit({"case": f"{name}: {take}", "actor": name, "take": take, "chosen": chosen.name,
+                      **{key: round(value, 4) for key, value in figures.items()},
+                      "truth_best_bands_moving_left_upper_bound": round(moving_left(blend, truth), 4),
+                      "truth_best_band_weights": weights, "band_edges_hz": list(EDGES_HZ),
+                      "obtained": {"skull": "solved (stabilize --actor, testset_score.py)", "rest": "given (the actor's rig)",
+                                   "scored": "face vertices, moving part (static share set apart), usdfacedyn remove as a user runs "
+                                             "it; the truth-best blend's weights chosen per take with its truth (an upper bound)",
+                                   "test data": "MuJoCo flex tissue over the actor's own bone (benchmarks/testset), plain captures "
+                                                "with tracker noise", "split": "validation actor", "models": made}})
 
 
 if __name__ == "__main__":
