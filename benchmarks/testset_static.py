@@ -10,7 +10,11 @@ integration?), and the run (CMU 131_02 at 1.6x) with its skull motion scaled abo
 path (testset.takes.scaled_about_steady_path). A linear tissue's mean offset would stay zero;
 a weakly nonlinear one's grows with the square of the motion; one that settles into another
 equilibrium jumps. One JSON record per case: the mean offset's RMS and largest vertex, the
-moving part's RMS (mm) and the static share.
+moving part's RMS (mm) and the static share. The run's cases also say how the moving part
+itself departs from a linear tissue's: its RMS per unit of motion scale, and how far it is
+from the quarter-size run's scaled up to its size (0 for a linear tissue), overall and per
+frequency band: what a linear response fitted at a quarter of the run's motion would miss
+even fitted perfectly.
 
     python benchmarks/testset_static.py [--actors val_default_2101 val_default_2112] [--jobs 2] [--out benchmarks/results/testset_static.json]
 
@@ -37,7 +41,9 @@ from facedyn import motion
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 SECONDS = 1.5
 PLATFORM_SCALES = (0.5, 0.75, 1.0)
-RUN_SCALES = (0.5, 1.0)
+RUN_SCALES = (0.25, 0.5, 1.0, 1.3)
+REFERENCE_SCALE = 0.25  # the run nearest a linear tissue
+BANDS_HZ = (2.0, 4.0, 8.0, 15.0)  # edges of the bands the departure is split into
 
 
 def cases(actor: str) -> list[tuple[str, TakeRecipe, int]]:
@@ -52,8 +58,9 @@ def cases(actor: str) -> list[tuple[str, TakeRecipe, int]]:
     return rows
 
 
-def measure(actor: str, label: str, recipe: TakeRecipe, substeps: int) -> dict:
-    """Simulate one case on the actor's own rig and tissue; its offsets' mean and moving part."""
+def measure(actor: str, label: str, recipe: TakeRecipe, substeps: int) -> tuple[dict, np.ndarray]:
+    """Simulate one case on the actor's own rig and tissue: (its record: the offsets' mean and
+    moving part; the moving part (F, V, 3) in mm)."""
     spec = ACTORS[actor]
     rig = actor_rig(spec, DATA)
     tissue = MujocoTissue(rig.neutral, rig.topology.triangles(), rig.face_vertices, TissueParams.random(spec.tissue_seed),
@@ -68,7 +75,25 @@ def measure(actor: str, label: str, recipe: TakeRecipe, substeps: int) -> dict:
             "moving_rms_mm": round(float(np.sqrt(((dynamics - mean) ** 2).sum(-1).mean())), 4),
             "static_share": round(static_share(take), 4), "cpu_seconds": round(time.perf_counter() - start, 1),
             "obtained": {"test data": "MuJoCo flex tissue over the actor's own bone (benchmarks/testset), true dynamics",
-                         "split": "validation actor"}}
+                         "split": "validation actor"}}, dynamics - mean
+
+
+def departure_from_linear(moving: np.ndarray, scale: float, reference: np.ndarray, fps: float) -> dict:
+    """How far a run's moving part (mm) is from the reference run's scaled up to its motion
+    scale, as a fraction of its RMS: overall, and the part of that difference in each band."""
+    scaled = reference * (scale / REFERENCE_SCALE)
+    difference = moving - scaled
+    total = float(np.sum(moving ** 2))
+    power = np.abs(np.fft.rfft(difference, axis=0)) ** 2
+    power = power.sum(axis=tuple(range(1, power.ndim)))
+    power[1:len(difference) // 2 + (len(difference) % 2)] *= 2  # both sides of the spectrum
+    hz = np.fft.rfftfreq(len(difference), 1.0 / fps)
+    edges = (0.0, *BANDS_HZ, np.inf)
+    share = {f"{lo:g}-{hi:g} Hz": round(float(np.sqrt(power[(hz >= lo) & (hz < hi)].sum() / len(difference) / total)), 4)
+             for lo, hi in zip(edges[:-1], edges[1:])}
+    return {"moving_rms_per_unit_motion_mm": round(float(np.sqrt((moving ** 2).sum(-1).mean())) / scale, 4),
+            "departure_from_quarter_size_scaled_up": round(float(np.sqrt(np.sum(difference ** 2) / total)), 4),
+            "departure_by_band": share}
 
 
 def main() -> None:
@@ -79,9 +104,16 @@ def main() -> None:
     args = arguments.parse_args()
     if not DATA.is_dir():
         raise SystemExit(f"{DATA}: the shared data folder is needed (its CMU mocap and Live Link curves)")
+    jobs = [(actor, *case) for actor in args.actors for case in cases(actor)]
     with Recorder("testset_static", args) as emit, ProcessPoolExecutor(max(args.jobs, 1)) as pool:
-        for result in pool.map(measure, *zip(*[(actor, *case) for actor in args.actors for case in cases(actor)])):
-            emit(result)
+        results = list(pool.map(measure, *zip(*jobs)))
+        runs = {actor: test_takes(ACTORS[actor].take_seed)[1].motion for actor in args.actors}
+        references = {record["actor"]: moving for record, moving in results
+                      if record["motion"] == runs[record["actor"]] and record["motion_scale"] == REFERENCE_SCALE}
+        for record, moving in results:
+            if record["motion"] == runs[record["actor"]]:
+                record.update(departure_from_linear(moving, record["motion_scale"], references[record["actor"]], FPS))
+            emit(record)
 
 
 if __name__ == "__main__":
