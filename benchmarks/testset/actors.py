@@ -45,6 +45,8 @@ TEST = (
     ActorSpec("test_ict_3101", "ict", 3101, 3101, 3101, "test"),
     ActorSpec("test_ict_3102", "ict", 3102, 3102, 3102, "test"),
     ActorSpec("test_default_3103", "default", 3103, 3103, 3103, "test"),
+    # a second built-in-face test actor, so that the test figures do not rest on one tissue
+    ActorSpec("test_default_3104", "default", 3104, 3104, 3104, "test"),
 )
 ACTORS = {actor.name: actor for actor in VALIDATION + TEST}
 
