@@ -37,24 +37,25 @@ from testset.takes import TakeRecipe
 from testset.tissue import MujocoTissue, TissueParams
 
 from facedyn import motion
+from facedyn.dynamics.bands import split
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 SECONDS = 1.5
 PLATFORM_SCALES = (0.5, 0.75, 1.0)
 RUN_SCALES = (0.25, 0.5, 1.0, 1.3)
 REFERENCE_SCALE = 0.25  # the run nearest a linear tissue
-BANDS_HZ = (2.0, 4.0, 8.0, 15.0)  # edges of the bands the departure is split into
+BANDS_HZ = (2.0, 4.0, 8.0, 15.0)  # edges of the bands the departure is split into (facedyn.dynamics.bands.split)
 
 
-def cases(actor: str) -> list[tuple[str, TakeRecipe, int]]:
-    """(label, recipe, substeps): the platform's amplitudes, its time-step check, the run's sizes."""
+def cases(actor: str) -> list[tuple[str, TakeRecipe, int, bool]]:
+    """(label, recipe, substeps, whether it is the run): the platform's amplitudes, its time-step check, the run's sizes."""
     spec = ACTORS[actor]
     _, run, platform = (replace(recipe, duration_s=SECONDS) for recipe in test_takes(spec.take_seed))
     steps = SUBSTEPS[spec.face]
     amplitude = motion.PLATFORM_AMPLITUDE_CM
-    rows = [(f"8 Hz platform, {scale * amplitude:g} cm", replace(platform, motion_scale=scale), steps) for scale in PLATFORM_SCALES]
-    rows.append((f"8 Hz platform, {amplitude:g} cm, {2 * steps} steps a frame", platform, 2 * steps))
-    rows += [(f"run (131_02 at 1.6x), motion x{scale:g}", replace(run, motion_scale=scale), steps) for scale in RUN_SCALES]
+    rows = [(f"8 Hz platform, {scale * amplitude:g} cm", replace(platform, motion_scale=scale), steps, False) for scale in PLATFORM_SCALES]
+    rows.append((f"8 Hz platform, {amplitude:g} cm, {2 * steps} steps a frame", platform, 2 * steps, False))
+    rows += [(f"run (131_02 at 1.6x), motion x{scale:g}", replace(run, motion_scale=scale), steps, True) for scale in RUN_SCALES]
     return rows
 
 
@@ -80,20 +81,15 @@ def measure(actor: str, label: str, recipe: TakeRecipe, substeps: int) -> tuple[
 
 def departure_from_linear(moving: np.ndarray, scale: float, reference: np.ndarray, fps: float) -> dict:
     """How far a run's moving part (mm) is from the reference run's scaled up to its motion
-    scale, as a fraction of its RMS: overall, and the part of that difference in each band."""
-    scaled = reference * (scale / REFERENCE_SCALE)
-    difference = moving - scaled
-    total = float(np.sum(moving ** 2))
-    power = np.abs(np.fft.rfft(difference, axis=0)) ** 2
-    power = power.sum(axis=tuple(range(1, power.ndim)))
-    power[1:len(difference) // 2 + (len(difference) % 2)] *= 2  # both sides of the spectrum
-    hz = np.fft.rfftfreq(len(difference), 1.0 / fps)
+    scale, as a fraction of its RMS: overall, and each band's part of that difference."""
+    difference = moving - reference * (scale / REFERENCE_SCALE)
+    size = np.sqrt(np.sum(moving ** 2))
     edges = (0.0, *BANDS_HZ, np.inf)
-    share = {f"{lo:g}-{hi:g} Hz": round(float(np.sqrt(power[(hz >= lo) & (hz < hi)].sum() / len(difference) / total)), 4)
-             for lo, hi in zip(edges[:-1], edges[1:])}
+    parts = split(difference, BANDS_HZ, fps)
     return {"moving_rms_per_unit_motion_mm": round(float(np.sqrt((moving ** 2).sum(-1).mean())) / scale, 4),
-            "departure_from_quarter_size_scaled_up": round(float(np.sqrt(np.sum(difference ** 2) / total)), 4),
-            "departure_by_band": share}
+            "departure_from_quarter_size_scaled_up": round(float(np.sqrt(np.sum(difference ** 2)) / size), 4),
+            "departure_by_band": {f"{lo:g}-{hi:g} Hz": round(float(np.sqrt(np.sum(part ** 2)) / size), 4)
+                                  for lo, hi, part in zip(edges[:-1], edges[1:], parts)}}
 
 
 def main() -> None:
@@ -106,13 +102,12 @@ def main() -> None:
         raise SystemExit(f"{DATA}: the shared data folder is needed (its CMU mocap and Live Link curves)")
     jobs = [(actor, *case) for actor in args.actors for case in cases(actor)]
     with Recorder("testset_static", args) as emit, ProcessPoolExecutor(max(args.jobs, 1)) as pool:
-        results = list(pool.map(measure, *zip(*jobs)))
-        runs = {actor: test_takes(ACTORS[actor].take_seed)[1].motion for actor in args.actors}
-        references = {record["actor"]: moving for record, moving in results
-                      if record["motion"] == runs[record["actor"]] and record["motion_scale"] == REFERENCE_SCALE}
-        for record, moving in results:
-            if record["motion"] == runs[record["actor"]]:
-                record.update(departure_from_linear(moving, record["motion_scale"], references[record["actor"]], FPS))
+        results = list(pool.map(measure, *zip(*[job[:4] for job in jobs])))
+        references = {actor: moving for (actor, _, recipe, _, is_run), (_, moving) in zip(jobs, results)
+                      if is_run and recipe.motion_scale == REFERENCE_SCALE}
+        for (actor, _, recipe, _, is_run), (record, moving) in zip(jobs, results):
+            if is_run:
+                record.update(departure_from_linear(moving, recipe.motion_scale, references[actor], FPS))
             emit(record)
 
 
