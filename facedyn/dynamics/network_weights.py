@@ -64,17 +64,7 @@ class NetworkWeights:
         x = np.asarray(inputs, dtype=np.float32)
         if x.ndim != 2 or x.shape[1] != self.spec.inputs:
             raise ValueError(f"the network takes (rows, {self.spec.inputs}) inputs, got {x.shape}")
-        (weight, bias), *rest = self.layers()
-        rest = _transposed(rest)
-        scaled = weight / self.state["input_std"]
-        first = np.ascontiguousarray(scaled.T)
-        shift = bias - scaled @ self.state["input_mean"]
-        out = np.empty((len(x), self.spec.outputs), np.float32)
-        for a in range(0, len(x), BLOCK_ROWS):
-            h = x[a:a + BLOCK_ROWS] @ first
-            h += shift
-            out[a:a + BLOCK_ROWS] = self._rest(h, rest)
-        return self._scaled_back(out)
+        return self.forward_split(np.empty((len(x), 0), np.float32), x[:, None, :])[:, 0]  # no shared part: the same products
 
     def forward_split(self, shared: np.ndarray, items: np.ndarray) -> np.ndarray:
         """(F, I, outputs) float32: forward(concat(shared[f], items[f, i])) for all f, i, without the concatenation.
