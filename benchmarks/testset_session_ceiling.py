@@ -22,7 +22,8 @@ on them: the same walk with a neutral face (does the dialog's changing expressio
 and at half the motion (does the tissue's nonlinearity?). Figures: the fraction of the true
 dynamics' moving part left (each side less its mean over the take) at the models' sample
 vertices (F_SAMPLES of the face), true skull; ``session_left``: the same over the session's
-own takes, in sample.
+own takes, in sample; for the 0.5 s filter also each take fitted without it, and each held
+expression's takes fitted without them (does the tissue answer each expression differently?).
 
     python benchmarks/testset_session_ceiling.py ACTOR_FOLDER [--session FOLDER] [--out benchmarks/results/testset_session_ceiling.json]
 
@@ -109,6 +110,30 @@ def fit_filter(session: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray
 
     ridge = min(RIDGES, key=left)
     return solve(total_g, total_m, rows, ridge), scale, ridge
+
+
+def held_out_left(session: list[tuple[np.ndarray, np.ndarray]], groups: list[str], ridge: float) -> float:
+    """The moving part the filter leaves of each group's takes, fitted without that group (the
+    group's sums subtracted from the session's): a group of one take each, or each held expression's."""
+    scale = np.concatenate([x for x, _ in session]).std(axis=0) + 1e-12
+    grams = [((x / scale).T @ (x / scale), (x / scale).T @ y, len(x)) for x, y in session]
+    total = [sum(g[k] for g in grams) for k in range(3)]
+    err = energy = 0.0
+    for group in sorted(set(groups)):
+        members = [i for i, g in enumerate(groups) if g == group]
+        gram, moment, count = (total[k] - sum(grams[i][k] for i in members) for k in range(3))
+        weights = np.linalg.solve(gram + ridge * count * np.eye(len(gram)), moment)
+        for i in members:
+            x, y = session[i]
+            err += float(np.sum(((x / scale) @ weights - y) ** 2))
+            energy += float(np.sum(y ** 2))
+    return float(np.sqrt(err / energy))
+
+
+def held_expression(take: str) -> str:
+    """A session take's held expression: session_<expression>_<motion> (testset.actors' names)."""
+    parts = take.removeprefix("session_").rsplit("_", 2)
+    return parts[0] if parts[-2] == "131" else take.removeprefix("session_").rsplit("_", 1)[0]
 
 
 def fit_mlp(session: list[tuple[np.ndarray, np.ndarray]], linear: np.ndarray, scale: np.ndarray, *, hidden: int = 256,
@@ -202,7 +227,13 @@ def main() -> None:
             rows = [settled_centred(*window.rows(truth), settle) for _, truth in session]
             weights, scale, ridge = fit_filter(rows)
             seconds = time.perf_counter() - began
-            record(f"linear FIR, past {past}", lambda truth: (window.rows(truth)[0] / scale) @ weights, seconds, ridge=ridge)
+            extra = {}
+            if past == PASTS[0]:
+                names = [take for take, _ in session]
+                extra = {"session_left_each_take_held_out": round(held_out_left(rows, names, ridge), 4),
+                         "session_left_each_expression_held_out": round(held_out_left(rows, [held_expression(t) for t in names], ridge), 4),
+                         "held_expressions": len({held_expression(t) for t in names})}
+            record(f"linear FIR, past {past}", lambda truth: (window.rows(truth)[0] / scale) @ weights, seconds, ridge=ridge, **extra)
             if past == PASTS[0]:
                 began = time.perf_counter()
                 network, epochs = fit_mlp(rows, weights, scale)
