@@ -51,7 +51,7 @@ import json
 import math
 import struct
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -162,9 +162,11 @@ class DynamicsModel:
         """The sample-to-mesh propagation of this model's face, built once (its solve kept on disk for later runs)."""
         if self._propagator is None:
             from facedyn.dynamics.propagate import build_propagator
+            from facedyn.dynamics.spread import Spread
 
-            self._propagator = build_propagator(self.face.rest_points, self.face.topology.triangles(), self.face.samples,
-                                                self.face.rigid_vertices, cache=True)
+            spread = Spread.from_arrays(self.arrays, len(self.face.samples), self.face.point_count)
+            self._propagator = replace(build_propagator(self.face.rest_points, self.face.topology.triangles(), self.face.samples,
+                                                        self.face.rigid_vertices, cache=True), spread=spread)
         return self._propagator
 
 
@@ -553,12 +555,23 @@ def _check(path: Path, stored: _Stored) -> _Checked:
             raise
         raise ModelFileError(f"{path} is an incomplete or inconsistent model: {type(exc).__name__}: {str(exc)[:200]}") from None
     _check_sizes(path, model, stored.size)
+    _check_spread(path, model)
     recorded = metadata.get("topology_fingerprint")
     if model.fingerprint != recorded:
         raise ModelFileError(f"{path}: its stored topology hashes to {model.fingerprint}, not the recorded {str(recorded)[:40]}")
     if stored.checksums is None:
         model.warnings.append(f"{path} is model format version {metadata['version']}, written without checksums, so damage to it cannot be detected; re-save it (load and save it with this facedyn) to add them")
     return model
+
+
+def _check_spread(path: Path, model: "_Checked") -> None:
+    """An actor's learned spread (facedyn.dynamics.spread), if the file carries one, fits its mesh."""
+    from facedyn.dynamics.spread import Spread
+
+    try:
+        Spread.from_arrays(model.arrays, len(model.face.samples), model.face.point_count)
+    except ValueError as error:
+        raise ModelFileError(f"{path}: {error}") from None
 
 
 def _check_skull_motion(path: Path, value) -> None:

@@ -32,6 +32,8 @@ from facedyn.kernels import runtime
 if TYPE_CHECKING:
     import scipy.sparse as sp
 
+    from facedyn.dynamics.spread import Spread
+
 _APPLY_CHUNK = 64  # frames per matrix product
 
 
@@ -71,6 +73,7 @@ class Propagator:
     matrix: np.ndarray  # (N, S) float32, P
     samples: np.ndarray  # (S,) int32
     operators: RestOperators = field(repr=False)
+    spread: Spread | None = field(default=None, repr=False)  # an actor's learned correction (facedyn.dynamics.spread), added to P d
 
     @property
     def rigid(self) -> np.ndarray:
@@ -98,7 +101,8 @@ class Propagator:
         return out
 
     def apply_into(self, offsets: np.ndarray, out: np.ndarray) -> None:
-        """Write P d for (F, S, 3) float32 offsets into a preallocated (F, N, 3) float32 array.
+        """Write P d (plus the spread's correction, if any) for (F, S, 3) float32 offsets into a
+        preallocated (F, N, 3) float32 array.
 
         Frames go through in chunks: one (chunk * 3, S) x (S, N) product each (BLAS, P read
         transposed in place), whose rows are a frame's x, y and z over every vertex, so each
@@ -112,6 +116,8 @@ class Propagator:
             f = len(chunk)
             product = chunk.transpose(0, 2, 1).reshape(f * 3, s) @ self.matrix.T
             out[a: a + f] = product.reshape(f, 3, n).transpose(0, 2, 1)
+            if self.spread is not None:
+                self.spread.add_into(chunk, out[a: a + f])
 
     def residual(self, offsets, backend: str = "auto") -> np.ndarray:
         """(F,) sqrt(sum_i |(L u)_i|^2 / m_i) of (F, N, 3) offsets: the energy minimized."""

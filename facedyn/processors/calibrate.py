@@ -13,7 +13,9 @@ The README's workflow for a real actor, as one resumable run within a stated bud
    the default's epochs depend on the machine's speed and load, and `--epochs` pins them
    (the same model on the same machine);
 3. `synthesis.response`: the actor's linear response fitted on the session, its ridge
-   chosen there (facedyn.dynamics.response), with F's samples and landmarks;
+   chosen there (facedyn.dynamics.response), with F's samples and landmarks, and the
+   actor's spread from those samples to the mesh learned on the session's skin motion
+   (facedyn.dynamics.spread), which every model calibrate writes for the actor carries;
 4. the removal chosen without truth: each candidate (the family's F, the response, the mean
    of the two, and the two weighed per frequency band) scored on the session by `evaluate
    --session`'s figure, the fraction of the held takes' motion it leaves (the response's own
@@ -131,6 +133,7 @@ class CalibrateProcessor(Processor):
 
     def run(self, plan: Plan, progress: Progress) -> FolderOutput:
         from facedyn.dynamics.bands import EDGES_HZ
+        from facedyn.dynamics.spread import RANK as SPREAD_RANK, RIDGE as SPREAD_RIDGE
         from facedyn.io.files import sha256_of_file
         from facedyn.processors.stages import Stages, file_state, key_of
 
@@ -152,7 +155,7 @@ class CalibrateProcessor(Processor):
         family_key = key_of("family", corpus_key, budget["epochs"], budget["training_seconds_planned"], budget["subsample"], params["seed"])
         family = stages.run("family", family_key, [out / "family.removal"],
                             lambda: train_family(out / "corpus", out / "family.removal", budget, corpus, params, progress))
-        response_key = key_of("response", family_key, session, params["ridge"], params["settle"])
+        response_key = key_of("response", family_key, session, params["ridge"], params["settle"], {"spread": [SPREAD_RIDGE, SPREAD_RANK]})
         response = stages.run("response", response_key, [out / "synthesis.response"],
                               lambda: fit_response(roots, out / "family.removal", out / "synthesis.response", params, progress))
         both = (out / "family.removal", out / "synthesis.response")
@@ -248,6 +251,7 @@ def fit_response(roots: list, family: Path, output: Path, params: dict, progress
     """Stage 3: the actor's linear response on the session, with F's samples and landmarks."""
     from facedyn.dynamics.modelfile import load_model, save_model
     from facedyn.dynamics.response import RIDGES, fit_linear_response, response_template
+    from facedyn.dynamics.spread import fit_model_spread
     from facedyn.dynamics.training_sequence import TrainingSequence
     from facedyn.processors.training_inputs import check_session_lengths, load_takes
 
@@ -257,13 +261,17 @@ def fit_response(roots: list, family: Path, output: Path, params: dict, progress
     template = response_template(f.face, f.fps, frame)
     check_session_lengths(takes, template, params["settle"])
     progress.start(f"fit the linear response ({len(takes)} takes)", len(RIDGES) if params["ridge"] is None else 1)
-    model = fit_linear_response(template, [TrainingSequence.from_performance(perf, name) for name, perf in takes],
-                                settle_s=params["settle"], ridge=params["ridge"], on_candidate=progress.advance)
+    sequences = [TrainingSequence.from_performance(perf, name) for name, perf in takes]
+    model = fit_linear_response(template, sequences, settle_s=params["settle"], ridge=params["ridge"], on_candidate=progress.advance)
+    progress.finish()
+    progress.start(f"learn the spread from the samples on the session ({len(takes)} takes)", 1)
+    model = fit_model_spread(model, sequences, params["settle"])
     progress.finish()
     model.info["calibration"].update(skull="take", inputs=[str(r) for r in roots])
     save_model(model, output)
     record = model.info["calibration"]
-    return {key: record[key] for key in ("ridge", "ridge_candidates", "session_cross_validated_left", "hardening")}
+    return {**{key: record[key] for key in ("ridge", "ridge_candidates", "session_cross_validated_left", "hardening")},
+            "spread": model.info["spread"]}
 
 
 def score_candidates(roots: list, family: Path, response: Path, params: dict, progress: Progress) -> dict:
@@ -274,6 +282,7 @@ def score_candidates(roots: list, family: Path, response: Path, params: dict, pr
 
     from facedyn.dynamics.modelfile import load_model
     from facedyn.dynamics.response import remove_left_out
+    from facedyn.dynamics.spread import spread_of, with_spread
     from facedyn.dynamics.training_sequence import TrainingSequence
     from facedyn.performance import QUASISTATIC
     from facedyn.processors.model_steps import removal_of, session_motion_left
@@ -281,9 +290,9 @@ def score_candidates(roots: list, family: Path, response: Path, params: dict, pr
     from facedyn.usd.take import read_take_below
 
     takes = [read_take_below(root, QUASISTATIC)[0] for root in roots]  # the stabilized takes, as remove reads them
-    f = load_model(family, topology=takes[0].topology, fps=takes[0].fps)
-    left_out = remove_left_out(load_model(response, topology=takes[0].topology, fps=takes[0].fps),
-                               [TrainingSequence.from_performance(perf, take_name(root)) for root, perf in zip(roots, takes)])
+    actor = load_model(response, topology=takes[0].topology, fps=takes[0].fps)
+    f = with_spread(load_model(family, topology=takes[0].topology, fps=takes[0].fps), *spread_of(actor))
+    left_out = remove_left_out(actor, [TrainingSequence.from_performance(perf, take_name(root)) for root, perf in zip(roots, takes)])
 
     def removals():
         for perf, (_, by_response) in zip(takes, left_out):
@@ -304,16 +313,19 @@ def write_removal(out: Path, chosen: str, band_weights: dict) -> Path:
     bands: a blend with `band_weights`, facedyn.dynamics.bands.BandWeights' record); any other
     removal.* a run before chose is removed (after the new one is in place)."""
     from facedyn.dynamics.bands import BandWeights
-    from facedyn.dynamics.modelfile import SUFFIXES, load_model, save_blend
+    from facedyn.dynamics.modelfile import SUFFIXES, load_model, save_blend, save_model
+    from facedyn.dynamics.spread import spread_of, with_spread
 
+    actor = load_model(out / "synthesis.response")
+    family = with_spread(load_model(out / "family.removal"), *spread_of(actor))  # the family's F, spread as this actor's skin moves
     if chosen in ("mean", "bands"):
         weights = BandWeights.from_json(band_weights) if chosen == "bands" else None
-        path = save_blend([load_model(out / "family.removal"), load_model(out / "synthesis.response")], out / f"removal{SUFFIXES['blend']}",
-                          weights)
+        path = save_blend([family, actor], out / f"removal{SUFFIXES['blend']}", weights)
+    elif chosen == "family":
+        path = save_model(family, out / f"removal{SUFFIXES['removal']}")
     else:
-        source = out / ("family.removal" if chosen == "family" else "synthesis.response")
-        data = source.read_bytes()
-        path = write_atomically(out / f"removal{source.suffix}", lambda handle: handle.write(data))
+        data = (out / "synthesis.response").read_bytes()
+        path = write_atomically(out / f"removal{SUFFIXES['response']}", lambda handle: handle.write(data))
     for other in SUFFIXES.values():
         if out / f"removal{other}" != path and (out / f"removal{other}").exists():
             (out / f"removal{other}").unlink()

@@ -7,7 +7,8 @@ import torch
 
 from facedyn.cli import main
 from facedyn.dynamics.bands import BandWeights
-from facedyn.dynamics.modelfile import load_model, save_blend
+from facedyn.dynamics.modelfile import load_model, save_blend, save_model
+from facedyn.dynamics.spread import spread_of, with_spread
 from facedyn.sim.corpus import TakeSpec
 from facedyn.sim.default_face import default_face
 from facedyn.sim.tissue import TissueParams
@@ -62,14 +63,19 @@ def test_calibrate_chooses_the_least_leaving_removal_and_resumes(actor_session, 
     assert record["budget"]["training_seconds_planned"] is None  # --epochs pins them: no minutes
     assert record["family"]["epochs"] == 2 and record["family"]["pairs_per_second"] > 0
     assert set(record["stage_seconds"]) == {"corpus", "family", "response", "scores"}
+    # the actor's spread, learned on the session, is in the response and in the family's F of every removal calibrate writes
+    actor = load_model(out / "synthesis.response")
+    spread = actor.info["spread"]
+    assert record["response"]["spread"] == spread and spread["session_missed_with_spread"] < spread["session_missed_by_smoothest"]
+    assert spread_of(load_model(out / "family.removal")) is None  # the family's own file stays the corpus's
+    family = save_model(with_spread(load_model(out / "family.removal"), *spread_of(actor)), tmp_path / "family_spread.removal")
     # the figures are evaluate --session's: the mean's, re-run by hand, is the recorded one
-    assert cli("evaluate", *roots, "--session", "true", "--removal", out / "family.removal", "--blend", out / "synthesis.response",
+    assert cli("evaluate", *roots, "--session", "true", "--removal", family, "--blend", out / "synthesis.response",
                "-o", tmp_path / "by_hand") == 0
     by_hand = json.loads((tmp_path / "by_hand" / "report.json").read_text())["session"]["motion_left_beyond_sag"]
     assert by_hand == figures["mean"]
     # and the band blend's: its weights applied by evaluate (as remove applies them) leave what the fit said
-    bands = save_blend([load_model(out / "family.removal"), load_model(out / "synthesis.response")], tmp_path / "bands.blend",
-                       BandWeights.from_json(record["candidates"]["bands"]["weights"]))
+    bands = save_blend([load_model(family), actor], tmp_path / "bands.blend", BandWeights.from_json(record["candidates"]["bands"]["weights"]))
     assert cli("evaluate", *roots, "--session", "true", "--removal", bands, "-o", tmp_path / "bands_by_hand") == 0
     by_hand = json.loads((tmp_path / "bands_by_hand" / "report.json").read_text())["session"]["motion_left_beyond_sag"]
     assert by_hand == pytest.approx(figures["bands"], abs=2e-4)
