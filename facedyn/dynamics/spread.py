@@ -10,9 +10,12 @@ than the held-out platform's whole target.
 A calibration session shows how this actor's skin moves between the samples: every take's
 motion about its mean (jiggle, sag, the held expression's drift and micro-motion alike). The
 correction is a ridge regression from the samples' motion to what the bi-Laplacian spread
-misses at every other free vertex, fitted on that motion (each take less its mean over its
+misses at every other vertex, fitted on that motion (each take less its mean over its
 settled frames, the tracker's spikes replaced) and kept as its `RANK` leading directions:
-``P' d = P d + (d A) B`` on those vertices, A (3S, r) and B (r, 3V). It is linear, so it
+``P' d = P d + (d A) B`` on those vertices, A (3S, r) and B (r, 3V). The rig's rigid region
+is among them: the bi-Laplacian holds it at zero, but where the session shows it moving with
+the samples (thin tissue over the bone still slides), the correction moves it the same way;
+where it does not, the ridge leaves it near zero. It is linear, so it
 serves removal, synthesis and a blend alike, and it is no model of dynamics: it only says
 how the mesh between the samples moves with them. `usdfacedyn calibrate` fits it with the
 actor's response and writes it into every model it makes for the actor (the arrays named
@@ -78,7 +81,7 @@ def fit_spread(takes: Iterable, propagator, settle_frames: int, *, ridge: float 
     samples = propagator.samples
     is_sample = np.zeros(propagator.matrix.shape[0], bool)
     is_sample[samples] = True
-    free = np.flatnonzero(~propagator.operators.fixed & ~is_sample).astype(np.int32)
+    free = np.flatnonzero(~is_sample).astype(np.int32)  # the rig's rigid region too: where the session moves it, it moves
     gram = moments = None
     missed = total = 0.0
     for take in takes:
