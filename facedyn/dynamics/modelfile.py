@@ -756,6 +756,7 @@ def _describe(path: Path, stored: _Stored) -> dict:
         "bytes_per_frame": frame_bytes(model)["per_frame"] if model.kind in ("removal", "synthesis") else None,
         "training": model.info.get("training"),
         **({"calibration": model.info["calibration"]} if model.kind == "response" else {}),
+        **({"spread": model.info["spread"]} if "spread" in model.info else {}),  # an actor's (facedyn.dynamics.spread)
         "validation": model.info.get("validation"),
         "warnings": list(model.warnings),
     }

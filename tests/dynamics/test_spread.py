@@ -7,7 +7,7 @@ import torch
 from synthetic_face import curved_sheet, top_rows
 
 from facedyn.dynamics.face import FaceSetup
-from facedyn.dynamics.modelfile import DynamicsModel, ModelFileError, load_model, save_model
+from facedyn.dynamics.modelfile import DynamicsModel, ModelFileError, describe_model, load_model, save_model
 from facedyn.dynamics.network import Network, removal_spec
 from facedyn.dynamics.spread import ARRAYS, INTO, Spread, fit_spread, spread_of, with_spread
 
@@ -78,7 +78,7 @@ def test_a_model_file_carries_its_spread_and_its_propagator_applies_it(face, tmp
     spread, record = fit_spread(session(face), model.propagator(), settle_frames=5, rank=12)
     path = save_model(with_spread(model, spread, record), tmp_path / "actor.removal")
     loaded = load_model(path)
-    assert loaded.info["spread"] == record and spread_of(loaded)[1] == record
+    assert loaded.info["spread"] == record and spread_of(loaded)[1] == record and describe_model(path)["spread"] == record  # inspect shows it
     d = np.random.default_rng(3).normal(0, 0.1, (4, len(face.samples), 3)).astype(np.float32)
     expected = model.propagator().apply(d)
     spread.add_into(d, expected)
