@@ -75,6 +75,16 @@ SECTIONS = (
      "On the validation actors' test takes: the family's F, the actor's linear response, their mean and calibrate's "
      "truth-free choice, beside the blend of F and the response weighed per band with the take's own truth (an upper bound "
      "for any choice of weights): whether the choice or the two models hold removal back (benchmarks/README-testset.md)."),
+    ("testset_session_ceiling", "What an actor's session can teach",
+     "Models fitted on a validation actor's session with its true dynamics (calibrate's response, unconstrained linear "
+     "filters over 0.5 and 1.5 s of skull motion, a network beside the filter), scored on its test takes and on its own "
+     "session takes in sample, and the response on the walk re-simulated with a neutral face and at half the motion: "
+     "whether a better model of the session, rather than better targets, could reach issue 37's figures "
+     "(benchmarks/README-testset.md)."),
+    ("testset_spread", "What the spread from the samples loses",
+     "A validation actor's true dynamics kept at F's skin samples and spread back to the mesh: by the bi-Laplacian at the "
+     "model's samples and at two and four times as many, and with the actor's spread calibrate learns on its stabilized "
+     "session: what even a perfect model at the samples would lose (benchmarks/README-testset.md)."),
     ("bench_motion_spectrum", "Skull motion spectra", "Where the skull's acceleration power lies, 6-15 Hz, procedural gaits beside real mocap."),
     ("tests", "The test suite", "The time of the README's test command."),
     ("testset", "Test set",
