@@ -85,8 +85,10 @@ def actor_name(folder: Path) -> str:
     return name
 
 
-def main() -> None:
-    arguments = parser(__doc__)
+def validation_actor(doc: str):
+    """(arguments, actor name, its spec, its rig, its face with F's samples) of a benchmark run on
+    one validation actor's folder, with --session for its session takes if they lie apart."""
+    arguments = parser(doc)
     arguments.add_argument("actor", type=Path, help="a validation actor's folder (testset_generate.py)")
     arguments.add_argument("--session", type=Path, help="the folder with its session takes, if not the actor's")
     args = arguments.parse_args()
@@ -95,6 +97,11 @@ def main() -> None:
     rig = actor_rig(spec, DATA)
     face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices,
                            sample_count=F_SAMPLES)
+    return args, name, spec, rig, face
+
+
+def main() -> None:
+    args, name, spec, rig, face = validation_actor(__doc__)
     template = response_template(face, FPS)
     session = session_truths(args.session or args.actor)
     neutral = np.asarray(rig.neutral, np.float64)

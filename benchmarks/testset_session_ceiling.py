@@ -33,22 +33,20 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-from harness import Recorder, parser
-from testset.actors import ACTORS, FPS, SUBSTEPS, test_takes
-from testset.generate import actor_rig, simulate_take
+from harness import Recorder
+from testset.actors import FPS, SUBSTEPS, test_takes
+from testset.generate import simulate_take
 from testset.score import load_truth
 from testset.takes import HELD
 from testset.tissue import MujocoTissue, TissueParams
-from testset_ceiling import DATA, actor_name, as_take, session_truths, synthesized
+from testset_ceiling import DATA, as_take, session_truths, synthesized, validation_actor
 
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.response import SETTLE_S, fit_linear_response, response_template
 from facedyn.dynamics.skull_motion import SkullMotionInput
-from facedyn.processors.calibrate import F_SAMPLES
 
 TAKES = ("dialog_walk", "dialog_run", "platform_8hz")
 RIDGES = (1e-3, 1e-2, 1e-1)  # per row, on standardized features
@@ -182,15 +180,7 @@ def fit_mlp(session: list[tuple[np.ndarray, np.ndarray]], linear: np.ndarray, sc
 
 
 def main() -> None:
-    arguments = parser(__doc__)
-    arguments.add_argument("actor", type=Path, help="a validation actor's folder (testset_generate.py)")
-    arguments.add_argument("--session", type=Path, help="the folder with its session takes, if not the actor's")
-    args = arguments.parse_args()
-    name = actor_name(args.actor)
-    spec = ACTORS[name]
-    rig = actor_rig(spec, DATA)
-    face = FaceSetup.build(rig.topology, rig.neutral, rigid_weights=rig.rigid_weights, face_vertices=rig.face_vertices,
-                           sample_count=F_SAMPLES)
+    args, name, spec, rig, face = validation_actor(__doc__)
     samples = face.samples
     session = session_truths(args.session or args.actor)
     tests = {take: load_truth(args.actor, take) for take in TAKES}
