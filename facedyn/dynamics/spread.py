@@ -108,7 +108,8 @@ def fit_spread(takes: Iterable, propagator, settle_frames: int, *, ridge: float 
         total += float(np.sum(motion[:, free] ** 2))
     if gram is None:
         raise ValueError("the spread needs at least one session take")
-    regularized = gram + ridge * np.trace(gram) / len(gram) * np.eye(len(gram))
+    scale = max(np.trace(gram) / len(gram), 1e-12)  # a session whose samples never move learns a spread that adds nothing
+    regularized = gram + ridge * scale * np.eye(len(gram))
     weights = np.linalg.solve(regularized, moments)
     # the leading directions of the fitted values X W: the right singular vectors of C^T W, C C^T the Gram
     _, _, directions = np.linalg.svd(np.linalg.cholesky(regularized).T @ weights, full_matrices=False)

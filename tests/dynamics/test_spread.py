@@ -102,3 +102,12 @@ def test_a_damaged_spread_is_a_clear_error_on_load(face, tmp_path, edit, message
     assert set(ARRAYS) == set(spread.arrays())
     with pytest.raises(ValueError, match=message):
         Spread.from_arrays(arrays, len(face.samples), face.point_count)
+
+
+def test_a_session_whose_skin_never_moves_learns_a_spread_that_adds_nothing(face):
+    still = [Take(np.repeat(face.rest_points[None], 40, axis=0).astype(np.float32), take.translate[:40], take.orient[:40])
+             for take in session(face, takes=2)]
+    spread, record = fit_spread(still, model_of(face).propagator(), settle_frames=5, rank=12)
+    offsets = np.zeros((3, face.point_count, 3), np.float32)
+    spread.add_into(np.ones((3, len(face.samples), 3), np.float32), offsets)
+    assert np.all(offsets == 0) and record["session_missed_by_smoothest"] == 0
