@@ -4,8 +4,9 @@ Every model predicts offsets at a few hundred skin samples, and facedyn.dynamics
 spreads them to every vertex as the smoothest (bi-Laplacian) field through them. A face does
 not move as the smoothest field: a cheek follows the lip corner in the pattern its anatomy
 gives it. On the test set's validation actors, sampling the *true* dynamics at F's 344 samples
-and spreading them back already loses 14-28 % of them (benchmarks/README-testset.md), more
-than the held-out platform's whole target.
+and spreading them back already loses 11-28 % of their moving part, more than the held-out
+platform's whole target; with the spread below, learned on the stabilized session, 4-10 %
+(benchmarks/testset_spread.py, benchmarks/README-testset.md).
 
 A calibration session shows how this actor's skin moves between the samples: every take's
 motion about its mean (jiggle, sag, the held expression's drift and micro-motion alike). The
