@@ -81,51 +81,39 @@ def settled_centred(x: np.ndarray, y: np.ndarray, settle: int) -> tuple[np.ndarr
     return x - x.mean(axis=0), y - y.mean(axis=0)
 
 
-def fit_filter(session: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, float]:
-    """(weights, feature scale, ridge): a ridge regression on standardized features, its ridge the
-    one that leaves the least of `FOLDS` folds of takes, each fitted without it (the folds' sums
-    subtracted from the session's)."""
-    scale = np.concatenate([x for x, _ in session]).std(axis=0) + 1e-12
-    grams = [((x / scale).T @ (x / scale), (x / scale).T @ y) for x, y in session]
-    folds = [list(range(k, len(session), FOLDS)) for k in range(FOLDS)]
-    total_g, total_m = sum(g for g, _ in grams), sum(m for _, m in grams)
-    rows = sum(len(x) for x, _ in session)
+class FilterSums:
+    """A session's sums for a ridge regression on standardized features, per take (its Gram, moments
+    and rows), so that the fit without any group of takes subtracts that group's sums from the
+    session's instead of summing the others again."""
 
-    def solve(gram, moment, count, ridge):
+    def __init__(self, session: list[tuple[np.ndarray, np.ndarray]]):
+        self.session = session
+        self.scale = np.concatenate([x for x, _ in session]).std(axis=0) + 1e-12
+        self.takes = [((x / self.scale).T @ (x / self.scale), (x / self.scale).T @ y, len(x)) for x, y in session]
+        self.total = [sum(t[k] for t in self.takes) for k in range(3)]
+
+    def solve(self, ridge: float, without: tuple[int, ...] = ()) -> np.ndarray:
+        gram, moment, count = (self.total[k] - sum(self.takes[i][k] for i in without) for k in range(3))
         return np.linalg.solve(gram + ridge * count * np.eye(len(gram)), moment)
 
-    def left(ridge):
+    def held_out_left(self, groups: list, ridge: float) -> float:
+        """The moving part the filter leaves of each group's takes, fitted without that group (a
+        group of one take each, every FOLDS-th take, or each held expression's)."""
         err = energy = 0.0
-        for fold in folds:
-            g = total_g - sum(grams[i][0] for i in fold)
-            m = total_m - sum(grams[i][1] for i in fold)
-            w = solve(g, m, rows - sum(len(session[i][0]) for i in fold), ridge)
-            for i in fold:
-                x, y = session[i]
-                err += float(np.sum(((x / scale) @ w - y) ** 2))
+        for group in sorted(set(groups)):
+            members = tuple(i for i, g in enumerate(groups) if g == group)
+            weights = self.solve(ridge, members)
+            for i in members:
+                x, y = self.session[i]
+                err += float(np.sum(((x / self.scale) @ weights - y) ** 2))
                 energy += float(np.sum(y ** 2))
-        return err / energy
+        return float(np.sqrt(err / energy))
 
-    ridge = min(RIDGES, key=left)
-    return solve(total_g, total_m, rows, ridge), scale, ridge
-
-
-def held_out_left(session: list[tuple[np.ndarray, np.ndarray]], groups: list[str], ridge: float) -> float:
-    """The moving part the filter leaves of each group's takes, fitted without that group (the
-    group's sums subtracted from the session's): a group of one take each, or each held expression's."""
-    scale = np.concatenate([x for x, _ in session]).std(axis=0) + 1e-12
-    grams = [((x / scale).T @ (x / scale), (x / scale).T @ y, len(x)) for x, y in session]
-    total = [sum(g[k] for g in grams) for k in range(3)]
-    err = energy = 0.0
-    for group in sorted(set(groups)):
-        members = [i for i, g in enumerate(groups) if g == group]
-        gram, moment, count = (total[k] - sum(grams[i][k] for i in members) for k in range(3))
-        weights = np.linalg.solve(gram + ridge * count * np.eye(len(gram)), moment)
-        for i in members:
-            x, y = session[i]
-            err += float(np.sum(((x / scale) @ weights - y) ** 2))
-            energy += float(np.sum(y ** 2))
-    return float(np.sqrt(err / energy))
+    def fit(self) -> tuple[np.ndarray, float]:
+        """(weights, ridge): the ridge that leaves the least of `FOLDS` folds of takes, each fitted without it."""
+        folds = [i % FOLDS for i in range(len(self.session))]
+        ridge = min(RIDGES, key=lambda r: self.held_out_left(folds, r))
+        return self.solve(ridge), ridge
 
 
 def held_expression(take: str) -> str:
@@ -215,13 +203,14 @@ def main() -> None:
             window = Window(face, past)
             began = time.perf_counter()
             rows = [settled_centred(*window.rows(truth), settle) for _, truth in session]
-            weights, scale, ridge = fit_filter(rows)
+            sums = FilterSums(rows)
+            (weights, ridge), scale = sums.fit(), sums.scale
             seconds = time.perf_counter() - began
             extra = {}
             if past == PASTS[0]:
                 names = [take for take, _ in session]
-                extra = {"session_left_each_take_held_out": round(held_out_left(rows, names, ridge), 4),
-                         "session_left_each_expression_held_out": round(held_out_left(rows, [held_expression(t) for t in names], ridge), 4),
+                extra = {"session_left_each_take_held_out": round(sums.held_out_left(names, ridge), 4),
+                         "session_left_each_expression_held_out": round(sums.held_out_left([held_expression(t) for t in names], ridge), 4),
                          "held_expressions": len({held_expression(t) for t in names})}
             record(f"linear FIR, past {past}", lambda truth: (window.rows(truth)[0] / scale) @ weights, seconds, ridge=ridge, **extra)
             if past == PASTS[0]:

@@ -91,7 +91,9 @@ class Spread:
 def fit_spread(takes: Iterable, propagator, settle_frames: int, *, ridge: float = RIDGE, rank: int = RANK) -> tuple[Spread, dict]:
     """(the spread, its record) learned on session takes (TrainingSequence-like: points, translate,
     orient, space) for a propagator's samples; the record says how much of the motion between
-    the samples the bi-Laplacian misses in the session, and how much with the spread (in sample)."""
+    the samples the bi-Laplacian misses in the session, and how much with the spread (in sample).
+    A spread the propagator already carries is not part of what is fitted against (a refit replaces it)."""
+    propagator = dataclasses.replace(propagator, spread=None)
     samples = propagator.samples
     is_sample = np.zeros(propagator.matrix.shape[0], bool)
     is_sample[samples] = True

@@ -9,7 +9,7 @@ from synthetic_face import curved_sheet, top_rows
 from facedyn.dynamics.face import FaceSetup
 from facedyn.dynamics.modelfile import DynamicsModel, ModelFileError, describe_model, load_model, save_model
 from facedyn.dynamics.network import Network, removal_spec
-from facedyn.dynamics.spread import ARRAYS, INTO, Spread, fit_spread, spread_of, with_spread
+from facedyn.dynamics.spread import ARRAYS, INTO, Spread, fit_model_spread, fit_spread, spread_of, with_spread
 
 ROWS, COLS = 16, 12
 
@@ -111,3 +111,10 @@ def test_a_session_whose_skin_never_moves_learns_a_spread_that_adds_nothing(face
     offsets = np.zeros((3, face.point_count, 3), np.float32)
     spread.add_into(np.ones((3, len(face.samples), 3), np.float32), offsets)
     assert np.all(offsets == 0) and record["session_missed_by_smoothest"] == 0
+
+
+def test_refitting_a_model_that_carries_a_spread_fits_against_the_bi_laplacian_alone(face):
+    first = fit_model_spread(model_of(face), session(face), settle_s=5 / 60)
+    again = fit_model_spread(first, session(face), settle_s=5 / 60)
+    np.testing.assert_array_equal(spread_of(again)[0].into, spread_of(first)[0].into)
+    assert spread_of(again)[1] == spread_of(first)[1]
